@@ -1,0 +1,61 @@
+//! drogue-sim: the simulated drogue trajectory driver and synthetic camera.
+//!
+//! Deterministic for a seed. Every rendered frame comes with its exact truth
+//! ([`FrameTruth`]), computed from the geometry, never from the pixels.
+//! PUBLIC CONTRACT below; the implementation is the simulator work (issue 3).
+
+use serde::{Deserialize, Serialize};
+
+/// The exact ellipse of the inner circle in undistorted pixels (from the
+/// image conic): a >= b, theta from +u toward +v in (-pi/2, pi/2].
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct TruthEllipse {
+    pub cx: f64,
+    pub cy: f64,
+    pub a: f64,
+    pub b: f64,
+    pub theta: f64,
+}
+
+/// Truth of one frame, in the field names and conventions of the reference
+/// data's `truth.jsonl`, plus body, NED and time.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct FrameTruth {
+    /// File name the frame is written under (`frame_000123.png`).
+    pub frame: String,
+    /// Sequence number from 0.
+    pub seq: u64,
+    /// Simulation time, seconds from the scenario start.
+    pub t: f64,
+    /// `detect` when the inner circle is in view, else `no_detect`.
+    pub expect: String,
+    /// Radius of the inner circle, metres.
+    pub radius: f64,
+    /// Inner circle centre, camera frame (x right, y down, z forward), metres.
+    pub position_camera: [f64; 3],
+    /// Unit normal of the drogue plane, camera frame, toward the camera.
+    pub normal_camera: [f64; 3],
+    /// The mirror solution that images to the same ellipse.
+    pub alt_position_camera: [f64; 3],
+    pub alt_normal_camera: [f64; 3],
+    /// Exact image ellipse of the inner circle; `None` when not in front.
+    pub ellipse: Option<TruthEllipse>,
+    pub range_m: f64,
+    /// Angle between the drogue normal and the line of sight, degrees.
+    pub tilt_deg: f64,
+    /// Share of the inner rim hidden by the probe, 0..1.
+    pub probe_rim_frac: f64,
+    /// Share of the inner rim hidden by the hose, 0..1.
+    pub hose_rim_frac: f64,
+    pub rim_fully_in_image: bool,
+    /// Inner circle centre, receiver body FRD, metres.
+    pub position_body: [f64; 3],
+    /// Drogue normal, body FRD.
+    pub normal_body: [f64; 3],
+    /// Inner circle centre, local NED, metres.
+    pub position_ned: [f64; 3],
+    /// Receiver (body origin) position, local NED, metres.
+    pub receiver_position_ned: [f64; 3],
+    /// Receiver attitude body → NED, Hamilton quaternion w, x, y, z.
+    pub receiver_q_ned_body: [f64; 4],
+}

@@ -1,0 +1,3 @@
+//! The subcommands of the `drogue-vision` binary, one module each.
+
+pub mod process;

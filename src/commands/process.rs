@@ -1,0 +1,177 @@
+//! `drogue-vision process`: offline measurement of a folder of images (or an
+//! MCAP log), one JSON line per frame.
+
+use crate::camera::CameraModel;
+use crate::config::Config;
+use crate::frame::{Frame, FrameOrigin};
+use crate::image_io::{is_image_path, read_gray8};
+use crate::measure::Measurer;
+use crate::record::DetectionRecord;
+use indicatif::{ProgressBar, ProgressStyle};
+use std::io::{BufWriter, Write};
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+/// Frame period assumed for a folder of images (their capture times are not
+/// known); only the tracker's prediction uses it.
+const FOLDER_FRAME_PERIOD_NS: u64 = 33_333_333;
+
+/// Arguments of `process` (see `drogue-vision process --help`).
+#[derive(Clone, Debug, clap::Args)]
+#[command(
+    after_help = "Exit status: 0 every frame was processed (unreadable frames are \
+records with `error`); 1 the output could not be written; 2 bad arguments, config, camera \
+file or input."
+)]
+pub struct ProcessArgs {
+    /// A folder of images (png, jpg, pgm, bmp; lexicographic order) or an MCAP log.
+    pub input: PathBuf,
+    /// Camera file (ROS camera_info or OpenCV YAML).
+    #[arg(long)]
+    pub camera: PathBuf,
+    /// Radius of the drogue's dark inner circle, metres (overrides the config).
+    #[arg(long)]
+    pub radius: Option<f64>,
+    /// Output JSON lines, one object per input frame.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Config file laid over the embedded default.
+    #[arg(long)]
+    pub config: Option<PathBuf>,
+    /// Treat the images as unrelated views, not a sequence: no tracking and no
+    /// temporal disambiguation.
+    #[arg(long)]
+    pub independent: bool,
+}
+
+/// What a `process` run did (printed on stderr at the end).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct ProcessSummary {
+    pub frames: usize,
+    pub detected: usize,
+    pub unreadable: usize,
+    /// Non-image files in the folder, not read.
+    pub skipped: usize,
+    /// Mean measurement time per readable frame, milliseconds.
+    pub ms_per_frame: f64,
+}
+
+/// Why `process` stopped.
+#[derive(Debug, thiserror::Error)]
+pub enum ProcessError {
+    /// Arguments, config, camera or input unusable: nothing was processed.
+    #[error("{0}")]
+    Setup(String),
+    /// The output could not be written.
+    #[error("writing {path}: {message}")]
+    Output { path: String, message: String },
+}
+
+/// Image files of a folder in lexicographic order, and the count of others.
+fn list_images(dir: &Path) -> Result<(Vec<PathBuf>, usize), ProcessError> {
+    let entries = std::fs::read_dir(dir)
+        .map_err(|e| ProcessError::Setup(format!("input {}: {e}", dir.display())))?;
+    let mut images = Vec::new();
+    let mut skipped = 0;
+    for entry in entries {
+        let path = entry
+            .map_err(|e| ProcessError::Setup(format!("input {}: {e}", dir.display())))?
+            .path();
+        if path.is_file() && is_image_path(&path) {
+            images.push(path);
+        } else if path.is_file() {
+            skipped += 1;
+        }
+    }
+    images.sort();
+    Ok((images, skipped))
+}
+
+fn progress_bar(len: u64) -> ProgressBar {
+    let bar = ProgressBar::new(len);
+    if let Ok(style) =
+        ProgressStyle::with_template("{bar:40} {pos}/{len} frames  {per_sec}  eta {eta}")
+    {
+        bar.set_style(style);
+    }
+    bar
+}
+
+/// Runs `process`. Progress on stderr when it is a terminal.
+pub fn run(args: &ProcessArgs) -> Result<ProcessSummary, ProcessError> {
+    let setup = |e: String| ProcessError::Setup(e);
+    let mut config = Config::load(args.config.as_deref()).map_err(|e| setup(e.to_string()))?;
+    if let Some(r) = args.radius {
+        if !(r > 0.0 && r < config.drogue.canopy_radius_m) {
+            return Err(setup(format!(
+                "--radius {r}: must be > 0 and below the canopy radius {} m",
+                config.drogue.canopy_radius_m
+            )));
+        }
+        config.drogue.inner_radius_m = r;
+    }
+    let camera = CameraModel::load(&args.camera).map_err(|e| setup(e.to_string()))?;
+    if !args.input.is_dir() {
+        return Err(setup(format!(
+            "input {}: not a folder of images",
+            args.input.display()
+        )));
+    }
+    let (images, skipped) = list_images(&args.input)?;
+    let mut measurer = Measurer::new(camera, &config).map_err(|e| setup(e.to_string()))?;
+
+    let out_err = |e: std::io::Error| ProcessError::Output {
+        path: args.out.display().to_string(),
+        message: e.to_string(),
+    };
+    let mut out = BufWriter::new(std::fs::File::create(&args.out).map_err(out_err)?);
+    let bar = progress_bar(images.len() as u64);
+    let mut summary = ProcessSummary {
+        skipped,
+        ..Default::default()
+    };
+    let mut measure_time = std::time::Duration::ZERO;
+    for (seq, path) in images.iter().enumerate() {
+        let name = path
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        let record = match read_gray8(path) {
+            Err(e) => {
+                summary.unreadable += 1;
+                tracing::warn!(frame = %name, "unreadable frame: {e}");
+                DetectionRecord::unreadable(name, e)
+            }
+            Ok(image) => {
+                if args.independent {
+                    measurer.forget_track();
+                }
+                let frame = Frame {
+                    seq: seq as u64,
+                    capture_time_ns: seq as u64 * FOLDER_FRAME_PERIOD_NS,
+                    image,
+                    origin: FrameOrigin::File(path.clone()),
+                };
+                let t = Instant::now();
+                let m = measurer.measure(&frame);
+                measure_time += t.elapsed();
+                summary.detected += usize::from(m.detection.is_some());
+                DetectionRecord::from_measurement(name, &m)
+            }
+        };
+        summary.frames += 1;
+        let line = serde_json::to_string(&record).map_err(|e| ProcessError::Output {
+            path: args.out.display().to_string(),
+            message: e.to_string(),
+        })?;
+        writeln!(out, "{line}").map_err(out_err)?;
+        bar.inc(1);
+    }
+    out.flush().map_err(out_err)?;
+    bar.finish_and_clear();
+    let readable = summary.frames - summary.unreadable;
+    if readable > 0 {
+        summary.ms_per_frame = measure_time.as_secs_f64() * 1e3 / readable as f64;
+    }
+    Ok(summary)
+}

@@ -1,0 +1,15 @@
+//! drogue-vision: the drogue's pose from one camera, streamed to the autopilot.
+//!
+//! Data flow (see `ARCHITECTURE.md`): `source` yields [`frame::Frame`]s, `measure`
+//! turns each into a [`measure::Measurement`], `link` streams it over MAVLink and
+//! `log` writes everything to MCAP.
+
+pub mod camera;
+pub mod commands;
+pub mod config;
+pub mod frame;
+pub mod image_io;
+pub mod link;
+pub mod log;
+pub mod measure;
+pub mod record;

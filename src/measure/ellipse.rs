@@ -1,0 +1,265 @@
+//! Ellipses in the image plane and their conic form.
+//!
+//! Everything here is in image pixels: u right, v down, origin at the centre of
+//! the top-left pixel (OpenCV convention).
+
+use nalgebra::{Matrix2, Matrix3, Vector2};
+use serde::{Deserialize, Serialize};
+use std::f64::consts::{FRAC_PI_2, PI};
+
+/// An ellipse in image pixels, in the architecture's JSON convention:
+/// `a >= b` are the semi-axes and `theta` is the major axis' angle from +u toward
+/// +v, in radians, in (-pi/2, pi/2].
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Ellipse {
+    pub cx: f64,
+    pub cy: f64,
+    pub a: f64,
+    pub b: f64,
+    pub theta: f64,
+}
+
+/// The conic `A u^2 + B u v + C v^2 + D u + E v + F = 0` (paper eq. 1).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Conic {
+    pub a: f64,
+    pub b: f64,
+    pub c: f64,
+    pub d: f64,
+    pub e: f64,
+    pub f: f64,
+}
+
+/// Wraps an axis angle into (-pi/2, pi/2]: an axis has no direction.
+pub fn wrap_axis_angle(theta: f64) -> f64 {
+    let mut t = theta % PI;
+    if t <= -FRAC_PI_2 {
+        t += PI;
+    } else if t > FRAC_PI_2 {
+        t -= PI;
+    }
+    t
+}
+
+impl Ellipse {
+    /// Builds an ellipse from any semi-axes and angle, putting it in the
+    /// canonical form (`a >= b`, theta wrapped).
+    pub fn new(cx: f64, cy: f64, a: f64, b: f64, theta: f64) -> Self {
+        let (a, b, theta) = if a >= b {
+            (a, b, theta)
+        } else {
+            (b, a, theta + FRAC_PI_2)
+        };
+        Self {
+            cx,
+            cy,
+            a,
+            b,
+            theta: wrap_axis_angle(theta),
+        }
+    }
+
+    /// The point at parameter `t` (radians) on the ellipse.
+    pub fn point_at(&self, t: f64) -> [f64; 2] {
+        let (s, c) = self.theta.sin_cos();
+        let (x, y) = (self.a * t.cos(), self.b * t.sin());
+        [self.cx + c * x - s * y, self.cy + s * x + c * y]
+    }
+
+    /// The conic of this ellipse, scaled so that `A + C = 1`.
+    pub fn to_conic(&self) -> Conic {
+        let (s, c) = self.theta.sin_cos();
+        let (a2, b2) = (self.a * self.a, self.b * self.b);
+        // Quadratic form of (R^T x)^T diag(1/a^2, 1/b^2) (R^T x) - 1.
+        let qa = c * c / a2 + s * s / b2;
+        let qb = 2.0 * c * s * (1.0 / a2 - 1.0 / b2);
+        let qc = s * s / a2 + c * c / b2;
+        let (x0, y0) = (self.cx, self.cy);
+        let d = -2.0 * qa * x0 - qb * y0;
+        let e = -qb * x0 - 2.0 * qc * y0;
+        let f = qa * x0 * x0 + qb * x0 * y0 + qc * y0 * y0 - 1.0;
+        let k = 1.0 / (qa + qc);
+        Conic {
+            a: qa * k,
+            b: qb * k,
+            c: qc * k,
+            d: d * k,
+            e: e * k,
+            f: f * k,
+        }
+    }
+
+    /// Largest difference to `other` in centre and semi-axes (pixels).
+    pub fn max_param_error_px(&self, other: &Ellipse) -> f64 {
+        [
+            (self.cx - other.cx).abs(),
+            (self.cy - other.cy).abs(),
+            (self.a - other.a).abs(),
+            (self.b - other.b).abs(),
+        ]
+        .into_iter()
+        .fold(0.0, f64::max)
+    }
+
+    /// Difference of axis angles (radians, in [0, pi/2]).
+    pub fn theta_error_rad(&self, other: &Ellipse) -> f64 {
+        wrap_axis_angle(self.theta - other.theta).abs()
+    }
+
+    /// Approximate geometric distance of a point to the ellipse (Sampson
+    /// distance of the conic), in pixels.
+    pub fn distance_px(&self, u: f64, v: f64) -> f64 {
+        self.to_conic().sampson_distance(u, v)
+    }
+}
+
+impl Conic {
+    /// The symmetric 3x3 matrix `[x y 1] M [x y 1]^T = 0` of the conic.
+    pub fn matrix(&self) -> Matrix3<f64> {
+        Matrix3::new(
+            self.a,
+            self.b / 2.0,
+            self.d / 2.0,
+            self.b / 2.0,
+            self.c,
+            self.e / 2.0,
+            self.d / 2.0,
+            self.e / 2.0,
+            self.f,
+        )
+    }
+
+    /// The conic of a symmetric matrix (only the upper triangle is read).
+    pub fn from_matrix(m: &Matrix3<f64>) -> Self {
+        Self {
+            a: m[(0, 0)],
+            b: 2.0 * m[(0, 1)],
+            c: m[(1, 1)],
+            d: 2.0 * m[(0, 2)],
+            e: 2.0 * m[(1, 2)],
+            f: m[(2, 2)],
+        }
+    }
+
+    /// The algebraic residual at a point (paper eq. 2 summand, unsquared).
+    pub fn algebraic(&self, u: f64, v: f64) -> f64 {
+        self.a * u * u + self.b * u * v + self.c * v * v + self.d * u + self.e * v + self.f
+    }
+
+    /// First-order geometric distance (Sampson): the algebraic residual over
+    /// its gradient's length. Exact to first order near the curve.
+    pub fn sampson_distance(&self, u: f64, v: f64) -> f64 {
+        let r = self.algebraic(u, v);
+        let gu = 2.0 * self.a * u + self.b * v + self.d;
+        let gv = self.b * u + 2.0 * self.c * v + self.e;
+        let g = (gu * gu + gv * gv).sqrt();
+        if g > 0.0 { r.abs() / g } else { f64::INFINITY }
+    }
+
+    /// The ellipse of this conic (paper eqs. 3-7, computed through the
+    /// eigen-decomposition so that it is exact for any scaling), or `None`
+    /// when the conic is not a real ellipse.
+    pub fn to_ellipse(&self) -> Option<Ellipse> {
+        let disc = self.b * self.b - 4.0 * self.a * self.c;
+        if !(disc < 0.0) || !disc.is_finite() {
+            return None;
+        }
+        // Centre: gradient zero.
+        let m2 = Matrix2::new(2.0 * self.a, self.b, self.b, 2.0 * self.c);
+        let centre = m2.lu().solve(&Vector2::new(-self.d, -self.e))?;
+        let (x0, y0) = (centre.x, centre.y);
+        let f0 = self.f + (self.d * x0 + self.e * y0) / 2.0;
+        let q = Matrix2::new(self.a, self.b / 2.0, self.b / 2.0, self.c);
+        let eig = q.symmetric_eigen();
+        let (l0, l1) = (eig.eigenvalues[0], eig.eigenvalues[1]);
+        let s0 = -f0 / l0;
+        let s1 = -f0 / l1;
+        if !(s0 > 0.0 && s1 > 0.0 && s0.is_finite() && s1.is_finite()) {
+            return None;
+        }
+        // The major axis belongs to the smaller |eigenvalue| (larger s).
+        let (major_s, minor_s, major_vec) = if s0 >= s1 {
+            (s0, s1, eig.eigenvectors.column(0).into_owned())
+        } else {
+            (s1, s0, eig.eigenvectors.column(1).into_owned())
+        };
+        let theta = wrap_axis_angle(major_vec.y.atan2(major_vec.x));
+        Some(Ellipse {
+            cx: x0,
+            cy: y0,
+            a: major_s.sqrt(),
+            b: minor_s.sqrt(),
+            theta,
+        })
+    }
+
+    /// This conic scaled to `A + C = 1` (the paper's normalisation).
+    pub fn normalised(&self) -> Option<Self> {
+        let k = self.a + self.c;
+        if k.abs() < f64::MIN_POSITIVE || !k.is_finite() {
+            return None;
+        }
+        Some(Self {
+            a: self.a / k,
+            b: self.b / k,
+            c: self.c / k,
+            d: self.d / k,
+            e: self.e / k,
+            f: self.f / k,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn conic_round_trip() {
+        let cases = [
+            Ellipse::new(640.0, 480.0, 120.0, 80.0, 0.3),
+            Ellipse::new(10.0, -5.0, 30.0, 29.999, -1.2),
+            Ellipse::new(100.0, 200.0, 50.0, 10.0, FRAC_PI_2),
+        ];
+        for e in cases {
+            let back = e.to_conic().to_ellipse().expect("ellipse");
+            assert!(e.max_param_error_px(&back) < 1e-7, "{e:?} {back:?}");
+            assert!(e.theta_error_rad(&back) < 1e-6, "{e:?} {back:?}");
+        }
+    }
+
+    #[test]
+    fn points_lie_on_the_conic() {
+        let e = Ellipse::new(300.0, 200.0, 90.0, 40.0, 0.7);
+        let c = e.to_conic();
+        for k in 0..36 {
+            let [u, v] = e.point_at(k as f64 * 0.17);
+            assert!(c.sampson_distance(u, v) < 1e-9);
+        }
+        // A point 2 px outside along the minor axis is about 2 px away.
+        let (s, co) = e.theta.sin_cos();
+        let (u, v) = (e.cx - s * (e.b + 2.0), e.cy + co * (e.b + 2.0));
+        assert!((c.sampson_distance(u, v) - 2.0).abs() < 0.1);
+    }
+
+    #[test]
+    fn hyperbola_is_not_an_ellipse() {
+        let c = Conic {
+            a: 1.0,
+            b: 0.0,
+            c: -1.0,
+            d: 0.0,
+            e: 0.0,
+            f: -1.0,
+        };
+        assert!(c.to_ellipse().is_none());
+    }
+
+    #[test]
+    fn canonical_form() {
+        let e = Ellipse::new(0.0, 0.0, 10.0, 20.0, 0.0);
+        assert_eq!(e.a, 20.0);
+        assert!((e.theta - FRAC_PI_2).abs() < 1e-12);
+        assert!((wrap_axis_angle(-FRAC_PI_2) - FRAC_PI_2).abs() < 1e-12);
+    }
+}

@@ -1,0 +1,252 @@
+//! The measurement: frame → rim points → ellipse → circle pose → body frame.
+//!
+//! Pure and synchronous: no I/O, so the same code serves `run`, `process` and
+//! replay, and a replayed log reproduces its detections exactly.
+
+pub mod ambiguity;
+pub mod detect;
+pub mod ellipse;
+pub mod fit;
+pub mod mount;
+pub mod pose;
+pub mod track;
+
+use crate::camera::CameraModel;
+use crate::config::Config;
+use crate::frame::Frame;
+use ellipse::Ellipse;
+use nalgebra::{Matrix3, Vector3};
+use serde::{Deserialize, Serialize};
+use std::time::Instant;
+
+pub use pose::CirclePose;
+
+/// How the single-circle two-fold ambiguity was settled for a detection.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Disambiguation {
+    /// The canopy's outer rim (a concentric circle) fits one solution only.
+    CanopyRim,
+    /// The solution closest to the tracked normal of earlier frames.
+    Continuity,
+    /// Not settled: both solutions are reported.
+    Unresolved,
+}
+
+/// Quality figures of one fit, for logs and the covariance.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct FitQuality {
+    /// Rim points found by the detector.
+    pub points: usize,
+    /// Points the robust fit kept.
+    pub inliers: usize,
+    /// RMS geometric residual of the inliers, pixels.
+    pub rms_residual_px: f64,
+    /// Detector evidence for this candidate, 0..1.
+    pub score: f64,
+}
+
+/// A detected drogue in one frame.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Detection {
+    /// Fitted ellipse of the dark inner circle, undistorted pixels.
+    pub ellipse_px: Ellipse,
+    /// The chosen circle pose, camera frame (metres; normal toward the camera).
+    pub pose_camera: CirclePose,
+    /// The other solution of the ambiguity while it is unresolved.
+    pub alt_pose_camera: Option<CirclePose>,
+    pub disambiguation: Disambiguation,
+    /// Centre of the dark circle in body FRD, metres.
+    pub position_body_m: Vector3<f64>,
+    /// Drogue normal in body FRD (unit, toward the camera).
+    pub normal_body: Vector3<f64>,
+    /// Drogue centre relative to the probe tip, body FRD axes, metres.
+    pub position_from_probe_body_m: Vector3<f64>,
+    /// Covariance of `position_body_m`, square metres.
+    pub position_cov_body_m2: Matrix3<f64>,
+    /// One-sigma angular uncertainty of the normal, radians.
+    pub normal_sigma_rad: f64,
+    pub quality: FitQuality,
+    /// Incremented each time the track is lost and found again
+    /// (MAVLink `reset_counter`).
+    pub track_epoch: u32,
+    /// Rim points as detected (distorted image pixels), for annotations.
+    pub rim_points_px: Vec<[f32; 2]>,
+    /// Which of `rim_points_px` the robust fit kept.
+    pub inliers: Vec<bool>,
+}
+
+/// Per-stage processing time of one frame, microseconds.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct StageTimes {
+    pub detect_us: u32,
+    pub fit_us: u32,
+    pub pose_us: u32,
+    pub total_us: u32,
+}
+
+/// The result of measuring one frame.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Measurement {
+    pub seq: u64,
+    /// Capture time of the frame, ns since the Unix epoch.
+    pub capture_time_ns: u64,
+    pub detection: Option<Detection>,
+    /// The search was limited to a region around the predicted ellipse.
+    pub tracked: bool,
+    pub times: StageTimes,
+}
+
+/// Why a measurer could not be built.
+#[derive(Debug, thiserror::Error)]
+pub enum MeasureSetupError {
+    #[error("mount: {0}")]
+    Mount(String),
+    #[error("drogue geometry: {0}")]
+    Drogue(String),
+}
+
+/// Runs the whole measurement chain over a sequence of frames. Holds the
+/// tracking state and scratch buffers; one per camera.
+pub struct Measurer {
+    camera: CameraModel,
+    inner_radius_m: f64,
+    canopy_radius_m: f64,
+    detector: detect::Detector,
+    fitter: fit::Fitter,
+    mount: mount::Mount,
+    tracker: track::Tracker,
+}
+
+fn micros_since(t: Instant) -> u32 {
+    u32::try_from(t.elapsed().as_micros()).unwrap_or(u32::MAX)
+}
+
+impl Measurer {
+    pub fn new(camera: CameraModel, config: &Config) -> Result<Self, MeasureSetupError> {
+        let d = &config.drogue;
+        if !(d.inner_radius_m > 0.0 && d.canopy_radius_m > d.inner_radius_m) {
+            return Err(MeasureSetupError::Drogue(format!(
+                "need 0 < inner_radius_m ({}) < canopy_radius_m ({})",
+                d.inner_radius_m, d.canopy_radius_m
+            )));
+        }
+        let mount = mount::Mount::from_config(&config.mount).map_err(MeasureSetupError::Mount)?;
+        Ok(Self {
+            detector: detect::Detector::new(&config.detect, &camera, d.inner_radius_m),
+            fitter: fit::Fitter::new(&config.fit),
+            tracker: track::Tracker::new(&config.track),
+            inner_radius_m: d.inner_radius_m,
+            canopy_radius_m: d.canopy_radius_m,
+            camera,
+            mount,
+        })
+    }
+
+    pub fn camera(&self) -> &CameraModel {
+        &self.camera
+    }
+
+    pub fn mount(&self) -> &mount::Mount {
+        &self.mount
+    }
+
+    /// Drops the track: the next frame is searched and disambiguated on its
+    /// own (for unrelated images, or after a jump in the source).
+    pub fn forget_track(&mut self) {
+        self.tracker.reset();
+    }
+
+    /// Measures one frame. Never fails: a frame without a drogue gives a
+    /// measurement without detection.
+    pub fn measure(&mut self, frame: &Frame) -> Measurement {
+        let start = Instant::now();
+        let mut times = StageTimes::default();
+        let hint = self.tracker.search_hint();
+        let tracked = hint.is_some();
+
+        let t = Instant::now();
+        let candidate = self.detector.detect(&frame.image, hint.as_ref());
+        times.detect_us = micros_since(t);
+
+        let detection = candidate.and_then(|cand| {
+            let t = Instant::now();
+            let undistorted: Vec<[f64; 2]> = cand
+                .rim_points_px
+                .iter()
+                .map(|p| self.camera.undistort_px(*p))
+                .collect();
+            let fitted = self.fitter.fit(&undistorted, frame.seq).ok()?;
+            times.fit_us = micros_since(t);
+
+            let t = Instant::now();
+            let [first, second] =
+                pose::cone_pose(&fitted.ellipse, &self.camera, self.inner_radius_m)?;
+            let canopy_scores = [
+                ambiguity::canopy_support(&frame.image, &self.camera, &first, self.canopy_radius_m),
+                ambiguity::canopy_support(
+                    &frame.image,
+                    &self.camera,
+                    &second,
+                    self.canopy_radius_m,
+                ),
+            ];
+            let choice = self.tracker.choose(
+                [first, second],
+                canopy_scores,
+                frame.capture_time_ns,
+                &fitted.ellipse,
+            );
+            let quality = FitQuality {
+                points: cand.rim_points_px.len(),
+                inliers: fitted.inliers.iter().filter(|&&k| k).count(),
+                rms_residual_px: fitted.rms_residual_px,
+                score: cand.score,
+            };
+            let cov_camera = pose::position_covariance_camera(
+                &fitted.ellipse,
+                &self.camera,
+                &choice.pose,
+                self.inner_radius_m,
+                &quality,
+            );
+            let normal_sigma_rad = pose::normal_sigma_rad(&fitted.ellipse, &quality);
+            let position_body_m = self
+                .mount
+                .point_camera_to_body(&choice.pose.centre_camera_m);
+            let normal_body = self.mount.vector_camera_to_body(&choice.pose.normal_camera);
+            let position_cov_body_m2 = self.mount.covariance_camera_to_body(&cov_camera);
+            times.pose_us = micros_since(t);
+            Some(Detection {
+                ellipse_px: fitted.ellipse,
+                pose_camera: choice.pose,
+                alt_pose_camera: choice.alternative,
+                disambiguation: choice.how,
+                position_from_probe_body_m: self.mount.point_body_from_probe(&position_body_m),
+                position_body_m,
+                normal_body,
+                position_cov_body_m2,
+                normal_sigma_rad,
+                quality,
+                track_epoch: choice.track_epoch,
+                rim_points_px: cand
+                    .rim_points_px
+                    .iter()
+                    .map(|p| [p[0] as f32, p[1] as f32])
+                    .collect(),
+                inliers: fitted.inliers,
+            })
+        });
+        if detection.is_none() {
+            self.tracker.lost(frame.capture_time_ns);
+        }
+        times.total_us = micros_since(start);
+        Measurement {
+            seq: frame.seq,
+            capture_time_ns: frame.capture_time_ns,
+            detection,
+            tracked,
+            times,
+        }
+    }
+}
