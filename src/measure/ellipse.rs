@@ -161,7 +161,7 @@ impl Conic {
     /// when the conic is not a real ellipse.
     pub fn to_ellipse(&self) -> Option<Ellipse> {
         let disc = self.b * self.b - 4.0 * self.a * self.c;
-        if !(disc < 0.0) || !disc.is_finite() {
+        if disc.is_nan() || disc >= 0.0 || !disc.is_finite() {
             return None;
         }
         // Centre: gradient zero.
