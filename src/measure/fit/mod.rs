@@ -1,13 +1,182 @@
-//! Ellipse fitting: the paper's least squares and Algorithm 1, fixed-threshold
-//! RANSAC, and our adaptive default. INTERFACE STUB (issue 2, item 4).
+//! Ellipse fitting: the paper's least squares (A+C=1) and Algorithm 1, the
+//! fixed-threshold RANSAC the paper compares against, and our adaptive default.
+//!
+//! All methods share the same front end ([`Points`]): non-finite points are
+//! dropped (and flagged as outliers), and the rest are moved to their centroid
+//! and scaled to unit RMS radius, so that every algebraic fit is well
+//! conditioned whatever the pixel coordinates. Distances and thresholds are
+//! given in pixels at the interface and converted inside.
+
+mod adaptive;
+mod algorithm1;
+mod cluster;
+mod geometric;
+mod least_squares;
+mod ransac;
+pub mod synth;
+mod taubin;
 
 use super::ellipse::Ellipse;
 use serde::{Deserialize, Serialize};
 
-/// Fit tunables (`[fit]` in the config).
+/// Which fitter runs (`[fit] method`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum FitMethod {
+    /// Our default: Algorithm 1 with a scale-aware parameter distance,
+    /// consensus among the biggest clusters, and an unbiased refit
+    /// (Taubin, then orthogonal-distance refinement).
+    Adaptive,
+    /// The paper's Algorithm 1, as published.
+    Algorithm1,
+    /// Fixed-threshold RANSAC with an A+C=1 refit of the consensus set.
+    Ransac,
+    /// The paper's least squares (A+C=1) over all points, no robustness.
+    LeastSquares,
+}
+
+impl FitMethod {
+    pub const ALL: [FitMethod; 4] = [
+        FitMethod::Adaptive,
+        FitMethod::Algorithm1,
+        FitMethod::Ransac,
+        FitMethod::LeastSquares,
+    ];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            FitMethod::Adaptive => "adaptive",
+            FitMethod::Algorithm1 => "algorithm1",
+            FitMethod::Ransac => "ransac",
+            FitMethod::LeastSquares => "least_squares",
+        }
+    }
+}
+
+/// Fit tunables (`[fit]` in the config; the defaults and their comments live
+/// in `config/default.toml`).
 #[derive(Clone, Debug, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
-pub struct FitConfig {}
+pub struct FitConfig {
+    pub method: FitMethod,
+    /// Algorithm 1: number of random subsets N.
+    pub algorithm1_subsets: usize,
+    /// Algorithm 1: points per subset n (>= 5).
+    pub algorithm1_subset_size: usize,
+    /// Algorithm 1: clustering stop threshold T, in eq. 8's units (pixels
+    /// and radians mixed, as in the paper).
+    pub algorithm1_cluster_threshold: f64,
+    /// Algorithm 1: a point whose deviation from M* is below this is an edge
+    /// point of P*, pixels.
+    pub algorithm1_inlier_threshold_px: f64,
+    /// RANSAC: maximum number of random 5-point samples.
+    pub ransac_iterations: usize,
+    /// RANSAC: fixed inlier threshold, pixels.
+    pub ransac_threshold_px: f64,
+    /// RANSAC: stop early once this fraction of the points agrees (N_T).
+    pub ransac_consensus_fraction: f64,
+    /// Adaptive: number of random subsets.
+    pub adaptive_subsets: usize,
+    /// Adaptive: points per subset (>= 5).
+    pub adaptive_subset_size: usize,
+    /// Adaptive: clusters merge while their distance is below
+    /// `adaptive_cluster_relative * radius + adaptive_cluster_px`.
+    pub adaptive_cluster_relative: f64,
+    /// Adaptive: absolute part of the cluster tolerance, pixels.
+    pub adaptive_cluster_px: f64,
+    /// Adaptive: how many of the biggest clusters are scored by consensus.
+    pub adaptive_clusters_scored: usize,
+    /// Adaptive: initial inlier band around a cluster's model, relative to
+    /// its mean radius (plus `adaptive_inlier_min_px`).
+    pub adaptive_initial_band_relative: f64,
+    /// Adaptive: the inlier band shrinks to this many robust sigmas of the
+    /// residuals.
+    pub adaptive_inlier_sigmas: f64,
+    /// Adaptive: the inlier band never gets narrower than this, pixels.
+    pub adaptive_inlier_min_px: f64,
+    /// Adaptive: rounds of (select inliers, refit).
+    pub adaptive_refine_rounds: usize,
+    /// Adaptive: Levenberg-Marquardt iterations of the orthogonal-distance
+    /// refinement.
+    pub geometric_iterations: usize,
+}
+
+impl FitConfig {
+    /// Checks the values serde cannot (ranges); the message names the key.
+    pub fn validate(&self) -> Result<(), String> {
+        let positive = [
+            (
+                "algorithm1_cluster_threshold",
+                self.algorithm1_cluster_threshold,
+            ),
+            (
+                "algorithm1_inlier_threshold_px",
+                self.algorithm1_inlier_threshold_px,
+            ),
+            ("ransac_threshold_px", self.ransac_threshold_px),
+            ("adaptive_inlier_sigmas", self.adaptive_inlier_sigmas),
+            ("adaptive_inlier_min_px", self.adaptive_inlier_min_px),
+        ];
+        for (key, v) in positive {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(format!("fit.{key} must be > 0 (got {v})"));
+            }
+        }
+        let non_negative = [
+            ("adaptive_cluster_relative", self.adaptive_cluster_relative),
+            ("adaptive_cluster_px", self.adaptive_cluster_px),
+            (
+                "adaptive_initial_band_relative",
+                self.adaptive_initial_band_relative,
+            ),
+        ];
+        for (key, v) in non_negative {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(format!("fit.{key} must be >= 0 (got {v})"));
+            }
+        }
+        if self.adaptive_cluster_relative + self.adaptive_cluster_px <= 0.0 {
+            return Err(
+                "fit.adaptive_cluster_relative and fit.adaptive_cluster_px cannot both be 0".into(),
+            );
+        }
+        if !(self.ransac_consensus_fraction > 0.0 && self.ransac_consensus_fraction <= 1.0) {
+            return Err(format!(
+                "fit.ransac_consensus_fraction must be in (0, 1] (got {})",
+                self.ransac_consensus_fraction
+            ));
+        }
+        for (key, v) in [
+            ("algorithm1_subset_size", self.algorithm1_subset_size),
+            ("adaptive_subset_size", self.adaptive_subset_size),
+        ] {
+            if v < 5 {
+                return Err(format!("fit.{key} must be >= 5 (got {v})"));
+            }
+        }
+        for (key, v) in [
+            ("algorithm1_subsets", self.algorithm1_subsets),
+            ("ransac_iterations", self.ransac_iterations),
+            ("adaptive_subsets", self.adaptive_subsets),
+            ("adaptive_clusters_scored", self.adaptive_clusters_scored),
+            ("adaptive_refine_rounds", self.adaptive_refine_rounds),
+        ] {
+            if v == 0 {
+                return Err(format!("fit.{key} must be >= 1"));
+            }
+        }
+        // The clustering is O(N^2) in memory and time: keep N sane.
+        for (key, v) in [
+            ("algorithm1_subsets", self.algorithm1_subsets),
+            ("adaptive_subsets", self.adaptive_subsets),
+        ] {
+            if v > 5000 {
+                return Err(format!("fit.{key} must be <= 5000 (got {v})"));
+            }
+        }
+        Ok(())
+    }
+}
 
 #[derive(Clone, Debug, PartialEq)]
 pub struct FitResult {
@@ -20,22 +189,259 @@ pub struct FitResult {
 
 #[derive(Debug, thiserror::Error, PartialEq)]
 pub enum FitError {
+    /// Fewer than 5 usable (finite, distinct) points.
     #[error("too few points: {0}")]
     TooFewPoints(usize),
     #[error("no ellipse fits the points")]
     NoEllipse,
+    #[error("invalid fit config: {0}")]
+    Config(String),
 }
 
 /// Runs the configured fit method; deterministic for a given seed.
-pub struct Fitter {}
+pub struct Fitter {
+    cfg: FitConfig,
+    config_error: Option<String>,
+}
 
 impl Fitter {
-    pub fn new(_cfg: &FitConfig) -> Self {
-        Self {}
+    /// A fitter for `cfg`. An out-of-range value is reported by every
+    /// [`Fitter::fit`] call (use [`FitConfig::validate`] to catch it early).
+    pub fn new(cfg: &FitConfig) -> Self {
+        Self {
+            cfg: cfg.clone(),
+            config_error: cfg.validate().err(),
+        }
     }
 
     /// Fits an ellipse to points in undistorted pixels.
-    pub fn fit(&mut self, points_px: &[[f64; 2]], _seed: u64) -> Result<FitResult, FitError> {
-        Err(FitError::TooFewPoints(points_px.len()))
+    pub fn fit(&mut self, points_px: &[[f64; 2]], seed: u64) -> Result<FitResult, FitError> {
+        if let Some(e) = &self.config_error {
+            return Err(FitError::Config(e.clone()));
+        }
+        fit_with(self.cfg.method, &self.cfg, points_px, seed)
+    }
+}
+
+/// Fits with an explicit method (for comparisons on the same points).
+/// Deterministic for a given seed.
+pub fn fit_with(
+    method: FitMethod,
+    cfg: &FitConfig,
+    points_px: &[[f64; 2]],
+    seed: u64,
+) -> Result<FitResult, FitError> {
+    cfg.validate().map_err(FitError::Config)?;
+    let pts = Points::new(points_px)?;
+    let (ellipse_n, inliers_n) = match method {
+        FitMethod::Adaptive => adaptive::fit(&pts, cfg, seed)?,
+        FitMethod::Algorithm1 => algorithm1::fit(&pts, cfg, seed)?,
+        FitMethod::Ransac => ransac::fit(&pts, cfg, seed)?,
+        FitMethod::LeastSquares => {
+            let e = least_squares::fit_ellipse(&pts.xy).ok_or(FitError::NoEllipse)?;
+            (e, vec![true; pts.xy.len()])
+        }
+    };
+    pts.result(&ellipse_n, &inliers_n)
+}
+
+/// The usable input points in normalised coordinates, `(p - mean) / scale`.
+/// Every fit here is invariant under this similarity, so it only improves the
+/// conditioning.
+pub(crate) struct Points {
+    /// Normalised coordinates of the finite points.
+    pub xy: Vec<[f64; 2]>,
+    /// Index into the caller's slice of each point in `xy`.
+    pub index: Vec<usize>,
+    /// Number of points the caller passed.
+    pub total: usize,
+    pub mean: [f64; 2],
+    /// Pixels per normalised unit.
+    pub scale: f64,
+}
+
+impl Points {
+    fn new(points_px: &[[f64; 2]]) -> Result<Self, FitError> {
+        let index: Vec<usize> = (0..points_px.len())
+            .filter(|&i| points_px[i].iter().all(|c| c.is_finite()))
+            .collect();
+        if index.len() < 5 {
+            return Err(FitError::TooFewPoints(index.len()));
+        }
+        let n = index.len() as f64;
+        // Two-pass mean and RMS radius; the per-point division keeps sums of
+        // huge coordinates finite.
+        let mut mean = [0.0; 2];
+        for &i in &index {
+            mean[0] += points_px[i][0] / n;
+            mean[1] += points_px[i][1] / n;
+        }
+        let mut ms = 0.0;
+        for &i in &index {
+            let (dx, dy) = (points_px[i][0] - mean[0], points_px[i][1] - mean[1]);
+            ms += (dx * dx + dy * dy) / n;
+        }
+        let scale = ms.sqrt();
+        if !(scale.is_finite() && scale > 0.0 && mean.iter().all(|m| m.is_finite())) {
+            return Err(FitError::NoEllipse);
+        }
+        let xy = index
+            .iter()
+            .map(|&i| {
+                [
+                    (points_px[i][0] - mean[0]) / scale,
+                    (points_px[i][1] - mean[1]) / scale,
+                ]
+            })
+            .collect();
+        Ok(Self {
+            xy,
+            index,
+            total: points_px.len(),
+            mean,
+            scale,
+        })
+    }
+
+    /// An ellipse in normalised coordinates, in pixels.
+    pub fn to_px(&self, e: &Ellipse) -> Ellipse {
+        Ellipse {
+            cx: e.cx * self.scale + self.mean[0],
+            cy: e.cy * self.scale + self.mean[1],
+            a: e.a * self.scale,
+            b: e.b * self.scale,
+            theta: e.theta,
+        }
+    }
+
+    /// An ellipse in pixels, in normalised coordinates.
+    pub fn from_px(&self, e: &Ellipse) -> Ellipse {
+        Ellipse {
+            cx: (e.cx - self.mean[0]) / self.scale,
+            cy: (e.cy - self.mean[1]) / self.scale,
+            a: e.a / self.scale,
+            b: e.b / self.scale,
+            theta: e.theta,
+        }
+    }
+
+    /// The caller-facing result of a fit in normalised coordinates.
+    fn result(&self, e: &Ellipse, inliers_n: &[bool]) -> Result<FitResult, FitError> {
+        let ellipse = self.to_px(e);
+        let finite = [ellipse.cx, ellipse.cy, ellipse.a, ellipse.b, ellipse.theta]
+            .iter()
+            .all(|v| v.is_finite());
+        if !finite || !(ellipse.b > 0.0) {
+            return Err(FitError::NoEllipse);
+        }
+        let mut inliers = vec![false; self.total];
+        let mut sum_sq = 0.0;
+        let mut count = 0usize;
+        let geo = geometric::Geometry::new(e);
+        for (k, &keep) in inliers_n.iter().enumerate() {
+            if keep {
+                inliers[self.index[k]] = true;
+                let d = geo.distance(self.xy[k]);
+                sum_sq += d * d;
+                count += 1;
+            }
+        }
+        let rms_residual_px = if count > 0 {
+            (sum_sq / count as f64).sqrt() * self.scale
+        } else {
+            0.0
+        };
+        Ok(FitResult {
+            ellipse,
+            inliers,
+            rms_residual_px,
+        })
+    }
+}
+
+/// The ellipse's mean semi-axis, a size for relative tolerances.
+pub(crate) fn mean_radius(e: &Ellipse) -> f64 {
+    0.5 * (e.a + e.b)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::config::Config;
+
+    fn cfg() -> FitConfig {
+        Config::embedded().fit
+    }
+
+    fn ring(e: &Ellipse, n: usize, arc: f64) -> Vec<[f64; 2]> {
+        (0..n)
+            .map(|k| e.point_at(arc * k as f64 / n as f64))
+            .collect()
+    }
+
+    #[test]
+    fn every_method_recovers_an_exact_ellipse() {
+        let truth = Ellipse::new(640.5, 480.25, 120.0, 70.0, 0.4);
+        let pts = ring(&truth, 200, std::f64::consts::TAU);
+        for m in FitMethod::ALL {
+            let r = fit_with(m, &cfg(), &pts, 1).unwrap();
+            assert!(
+                r.ellipse.max_param_error_px(&truth) < 1e-6,
+                "{m:?} {:?}",
+                r.ellipse
+            );
+            assert!(r.ellipse.theta_error_rad(&truth) < 1e-8, "{m:?}");
+            assert!(r.rms_residual_px < 1e-6, "{m:?} {}", r.rms_residual_px);
+            assert_eq!(r.inliers.len(), pts.len());
+        }
+    }
+
+    #[test]
+    fn non_finite_points_are_dropped_and_flagged() {
+        let truth = Ellipse::new(100.0, 50.0, 30.0, 20.0, -0.3);
+        let mut pts = ring(&truth, 60, std::f64::consts::TAU);
+        pts[3] = [f64::NAN, 1.0];
+        pts[10] = [1.0, f64::INFINITY];
+        let r = Fitter::new(&cfg()).fit(&pts, 7).unwrap();
+        assert!(!r.inliers[3] && !r.inliers[10]);
+        assert!(r.ellipse.max_param_error_px(&truth) < 1e-6);
+    }
+
+    #[test]
+    fn too_few_and_degenerate_inputs_are_errors() {
+        let mut f = Fitter::new(&cfg());
+        assert_eq!(f.fit(&[], 0), Err(FitError::TooFewPoints(0)));
+        let four = [[0.0, 0.0], [1.0, 0.0], [0.0, 1.0], [1.0, 1.0]];
+        assert_eq!(f.fit(&four, 0), Err(FitError::TooFewPoints(4)));
+        let same = [[3.0, 4.0]; 50];
+        assert!(f.fit(&same, 0).is_err());
+        let line: Vec<[f64; 2]> = (0..50).map(|k| [k as f64, 2.0 * k as f64 + 1.0]).collect();
+        for m in FitMethod::ALL {
+            assert!(fit_with(m, &cfg(), &line, 0).is_err(), "{m:?}");
+        }
+    }
+
+    #[test]
+    fn invalid_config_is_reported_by_key() {
+        let mut c = cfg();
+        c.adaptive_subset_size = 4;
+        let e = c.validate().unwrap_err();
+        assert!(e.contains("fit.adaptive_subset_size"), "{e}");
+        let mut f = Fitter::new(&c);
+        let truth = Ellipse::new(0.0, 0.0, 3.0, 2.0, 0.0);
+        assert!(matches!(
+            f.fit(&ring(&truth, 20, 6.0), 0),
+            Err(FitError::Config(_))
+        ));
+    }
+
+    #[test]
+    fn method_names_match_the_config_spelling() {
+        for m in FitMethod::ALL {
+            let toml = format!("[fit]\nmethod = \"{}\"\n", m.name());
+            let c = Config::from_toml_str(&toml, "t.toml").unwrap();
+            assert_eq!(c.fit.method, m);
+        }
+        assert!(Config::from_toml_str("[fit]\nmethod = \"hough\"\n", "t.toml").is_err());
     }
 }

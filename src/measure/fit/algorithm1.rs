@@ -1,0 +1,91 @@
+//! The paper's Algorithm 1 (section 2.3), as published: N random subsets of
+//! n points, an A+C=1 least squares ellipse for each (eqs. 1-7),
+//! agglomerative hierarchical clustering of their parameter vectors
+//! (xc, yc, a, b, theta) with the distance of eq. 8, centroid update eq. 10
+//! and stop threshold T; the centre of the biggest class is the model M*;
+//! the points whose deviation from M* is below a threshold form P*, and the
+//! result is the A+C=1 least squares ellipse of P*.
+//!
+//! Eq. 8 adds pixels and radians, and theta is plain-averaged and
+//! plain-differenced (so 89.9 deg and -89.9 deg are "far apart"); that is the
+//! paper's method and is kept here for comparison. The deviation is the
+//! first-order geometric (Sampson) distance in pixels.
+
+use super::cluster::agglomerate;
+use super::{FitConfig, FitError, Points, least_squares};
+use crate::measure::ellipse::Ellipse;
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+
+/// Eq. 8: Euclidean distance of (xc, yc, a, b, theta).
+fn eq8(v: &[f64; 5], w: &[f64; 5]) -> f64 {
+    v.iter()
+        .zip(w)
+        .map(|(x, y)| (x - y) * (x - y))
+        .sum::<f64>()
+        .sqrt()
+}
+
+/// The ellipses of `subsets` random subsets of `size` points (normalised
+/// coordinates); subsets whose fit is not an ellipse are discarded (sec. 2.1).
+pub(crate) fn subset_ellipses(
+    pts: &Points,
+    subsets: usize,
+    size: usize,
+    seed: u64,
+) -> Vec<Ellipse> {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let size = size.min(pts.xy.len());
+    let mut out = Vec::with_capacity(subsets);
+    for _ in 0..subsets {
+        let idx = rand::seq::index::sample(&mut rng, pts.xy.len(), size);
+        let conic = least_squares::fit_conic(idx.iter().map(|i| &pts.xy[i]));
+        if let Some(e) = conic.and_then(|c| least_squares::conic_to_ellipse(&c)) {
+            out.push(e);
+        }
+    }
+    out
+}
+
+/// Algorithm 1; returns the ellipse (normalised coordinates) and P*.
+pub(crate) fn fit(
+    pts: &Points,
+    cfg: &FitConfig,
+    seed: u64,
+) -> Result<(Ellipse, Vec<bool>), FitError> {
+    // Lines 1-5: the parameter set S, in pixels and radians as in the paper.
+    let set: Vec<[f64; 5]> = subset_ellipses(
+        pts,
+        cfg.algorithm1_subsets,
+        cfg.algorithm1_subset_size,
+        seed,
+    )
+    .iter()
+    .map(|e| {
+        let p = pts.to_px(e);
+        [p.cx, p.cy, p.a, p.b, p.theta]
+    })
+    .collect();
+    // Lines 6-17: cluster; M* is the centre of the biggest class.
+    let clusters = agglomerate(&set, eq8, cfg.algorithm1_cluster_threshold);
+    let best = clusters.first().ok_or(FitError::NoEllipse)?;
+    let [cx, cy, a, b, theta] = best.centre;
+    let m_star = pts.from_px(&Ellipse::new(cx, cy, a, b, theta));
+    if !(m_star.a > 0.0 && m_star.b > 0.0) {
+        return Err(FitError::NoEllipse);
+    }
+    // Line 18: P* = points whose deviation from M* is below the threshold.
+    let conic = m_star.to_conic();
+    let limit = cfg.algorithm1_inlier_threshold_px / pts.scale;
+    let inliers: Vec<bool> = pts
+        .xy
+        .iter()
+        .map(|p| conic.sampson_distance(p[0], p[1]) < limit)
+        .collect();
+    // Line 19: A+C=1 least squares on P*.
+    if inliers.iter().filter(|k| **k).count() < 5 {
+        return Err(FitError::NoEllipse);
+    }
+    let e = least_squares::fit_ellipse_selected(&pts.xy, &inliers).ok_or(FitError::NoEllipse)?;
+    Ok((e, inliers))
+}
