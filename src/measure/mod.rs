@@ -162,7 +162,7 @@ impl Measurer {
     pub fn measure(&mut self, frame: &Frame) -> Measurement {
         let start = Instant::now();
         let mut times = StageTimes::default();
-        let hint = self.tracker.search_hint();
+        let hint = self.tracker.search_hint(frame.capture_time_ns);
         let tracked = hint.is_some();
 
         let t = Instant::now();

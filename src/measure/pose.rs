@@ -199,9 +199,9 @@ pub fn cone_pose(
 /// The ellipse as centre + the symmetric matrix M that maps the unit circle
 /// onto it (`p = c + M (cos t, sin t)`): `[cx, cy, m11, m12, m22]`. Unlike
 /// (a, b, theta) this is smooth through circles, so covariances stay finite.
-type EllipseParams = SVector<f64, 5>;
+pub(crate) type EllipseParams = SVector<f64, 5>;
 
-fn ellipse_params(e: &Ellipse) -> EllipseParams {
+pub(crate) fn ellipse_params(e: &Ellipse) -> EllipseParams {
     let (s, c) = e.theta.sin_cos();
     EllipseParams::new(
         e.cx,
@@ -212,7 +212,8 @@ fn ellipse_params(e: &Ellipse) -> EllipseParams {
     )
 }
 
-fn ellipse_from_params(p: &EllipseParams) -> Option<Ellipse> {
+/// The ellipse of `EllipseParams`, or `None` if M is not positive definite.
+pub(crate) fn ellipse_from_params(p: &EllipseParams) -> Option<Ellipse> {
     let eig = Matrix2::new(p[2], p[3], p[3], p[4]).symmetric_eigen();
     let (i_major, i_minor) = if eig.eigenvalues[0] >= eig.eigenvalues[1] {
         (0, 1)
