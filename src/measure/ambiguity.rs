@@ -1,18 +1,218 @@
 //! Telling the two cone solutions apart from the canopy's outer rim.
-//! INTERFACE STUB (issue 2, item 5).
+//!
+//! A single circle's image fits two poses (mirror images about the cone's
+//! widest plane). The drogue's canopy ends in a rim: a circle concentric with
+//! the dark inner circle, in the same plane, with a known radius. Each pose
+//! predicts where that rim must appear; the two predictions differ visibly
+//! once the tilt is more than a few degrees, and only the true one lies on the
+//! rim's edge in the image. Near a frontal view (tilt ~ 0) both predictions
+//! coincide, both get the same support, and then the choice hardly matters:
+//! the two solutions are then nearly the same pose.
+//!
+//! The rim is darker than the sky around it (a dark band at the canopy's edge),
+//! so the edge we look for gets brighter going outward. Its inner side (band
+//! against the lighter canopy) has the opposite polarity and is not counted.
 
 use super::pose::CirclePose;
 use crate::camera::CameraModel;
 use image::GrayImage;
+use nalgebra::Vector3;
+
+/// Points sampled along the predicted rim.
+const SAMPLES: usize = 180;
+/// How far across the predicted curve an edge may be, pixels. Covers the
+/// prediction's own error: the inner ellipse's fit error, scaled up by the
+/// canopy/inner radius ratio (about 2.2), plus the edge's blur.
+const SEARCH_PX: f64 = 2.0;
+/// Step of the search across the curve, pixels.
+const SEARCH_STEP_PX: f64 = 0.5;
+/// Smallest outward brightening that counts as an edge, grey levels per pixel
+/// (central difference over 2 px). Sensor noise of ~1.5 grey levels gives
+/// ~1 grey level/px of derivative noise: 6 keeps noise-only maxima out, while
+/// a rim against the sky gives tens.
+const MIN_EDGE_GREY_PER_PX: f64 = 6.0;
+/// Share of the predicted rim that must fall inside the image to judge.
+const MIN_SHARE_IN_IMAGE: f64 = 0.5;
+/// Smallest predicted rim (semi-minor axis, pixels) worth judging: below this
+/// the two predictions are within the search band of each other anyway.
+const MIN_RIM_SIZE_PX: f64 = 4.0;
+
+/// Bilinear grey value at (u, v) (pixel centres at integers), or `None`
+/// outside the image.
+fn grey_at(image: &GrayImage, u: f64, v: f64) -> Option<f64> {
+    let (w, h) = image.dimensions();
+    if !(u >= 0.0 && v >= 0.0 && u <= (w as f64 - 1.0) && v <= (h as f64 - 1.0)) {
+        return None;
+    }
+    let (u0, v0) = (u.floor(), v.floor());
+    let (fu, fv) = (u - u0, v - v0);
+    let (x0, y0) = (u0 as u32, v0 as u32);
+    let (x1, y1) = ((x0 + 1).min(w - 1), (y0 + 1).min(h - 1));
+    let g = |x: u32, y: u32| f64::from(image.get_pixel(x, y).0[0]);
+    let top = g(x0, y0) * (1.0 - fu) + g(x1, y0) * fu;
+    let bottom = g(x0, y1) * (1.0 - fu) + g(x1, y1) * fu;
+    Some(top * (1.0 - fv) + bottom * fv)
+}
+
+/// Strongest outward brightening within `SEARCH_PX` of `p` along the unit
+/// image direction `out`, grey levels per pixel; `None` if the search leaves
+/// the image.
+fn outward_edge(image: &GrayImage, p: [f64; 2], out: [f64; 2]) -> Option<f64> {
+    let steps = (SEARCH_PX / SEARCH_STEP_PX).round() as i32;
+    let mut best = f64::NEG_INFINITY;
+    for k in -steps..=steps {
+        let o = f64::from(k) * SEARCH_STEP_PX;
+        let at = |d: f64| grey_at(image, p[0] + out[0] * (o + d), p[1] + out[1] * (o + d));
+        best = best.max((at(1.0)? - at(-1.0)?) / 2.0);
+    }
+    Some(best)
+}
 
 /// Image evidence (0..1) that the canopy's outer rim, a circle of
-/// `canopy_radius_m` concentric with the inner circle, lies where `pose`
-/// predicts it. `None` where the rim is not visible enough to judge.
+/// `canopy_radius_m` concentric with the inner circle and in its plane, lies
+/// where `pose` predicts it: the share of points along the predicted rim
+/// (projected through the camera's distortion) with an outward-brightening
+/// edge within `SEARCH_PX`. `None` where the rim cannot be judged: less than
+/// half of it in the image, or too small. A rim hidden by clouds, glare or
+/// the hose gives a low support for both solutions; the tracker then does not
+/// use it.
 pub fn canopy_support(
-    _image: &GrayImage,
-    _camera: &CameraModel,
-    _pose: &CirclePose,
-    _canopy_radius_m: f64,
+    image: &GrayImage,
+    camera: &CameraModel,
+    pose: &CirclePose,
+    canopy_radius_m: f64,
 ) -> Option<f64> {
-    None
+    let n = pose.normal_camera;
+    if !(canopy_radius_m > 0.0 && n.iter().all(|x| x.is_finite()) && n.norm() > 0.5) {
+        return None;
+    }
+    let n = n.normalize();
+    let helper = if n.x.abs() < 0.9 {
+        Vector3::x()
+    } else {
+        Vector3::y()
+    };
+    let e1 = n.cross(&helper).normalize();
+    let e2 = n.cross(&e1);
+    // Slightly inside and outside the rim, to get the image's outward direction.
+    let delta = 0.02 * canopy_radius_m;
+
+    let (mut judged, mut with_edge) = (0usize, 0usize);
+    let (mut min_u, mut max_u, mut min_v, mut max_v) = (
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+    );
+    for k in 0..SAMPLES {
+        let t = k as f64 * std::f64::consts::TAU / SAMPLES as f64;
+        let radial = t.cos() * e1 + t.sin() * e2;
+        let point = |r: f64| camera.project_px(&(pose.centre_camera_m + r * radial));
+        let (Some(p), Some(p_in), Some(p_out)) = (
+            point(canopy_radius_m),
+            point(canopy_radius_m - delta),
+            point(canopy_radius_m + delta),
+        ) else {
+            continue;
+        };
+        let d = [p_out[0] - p_in[0], p_out[1] - p_in[1]];
+        let len = d[0].hypot(d[1]);
+        if !(len > 0.0 && len.is_finite()) {
+            continue;
+        }
+        min_u = min_u.min(p[0]);
+        max_u = max_u.max(p[0]);
+        min_v = min_v.min(p[1]);
+        max_v = max_v.max(p[1]);
+        if let Some(edge) = outward_edge(image, p, [d[0] / len, d[1] / len]) {
+            judged += 1;
+            if edge >= MIN_EDGE_GREY_PER_PX {
+                with_edge += 1;
+            }
+        }
+    }
+    let big_enough = (max_u - min_u).min(max_v - min_v) >= 2.0 * MIN_RIM_SIZE_PX;
+    if !big_enough || (judged as f64) < MIN_SHARE_IN_IMAGE * SAMPLES as f64 {
+        return None;
+    }
+    Some(with_edge as f64 / judged as f64)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use image::Luma;
+    use nalgebra::Matrix3;
+
+    fn camera() -> CameraModel {
+        let k = Matrix3::new(800.0, 0.0, 320.0, 0.0, 800.0, 240.0, 0.0, 0.0, 1.0);
+        CameraModel::new("t", 640, 480, k, [0.0; 5]).unwrap()
+    }
+
+    /// Paints a synthetic drogue, exact per pixel centre: sky 170, canopy 150,
+    /// dark band at the rim (r in [0.30, 0.33]) 70, inner circle 30.
+    fn render(cam: &CameraModel, pose: &CirclePose) -> GrayImage {
+        let n = pose.normal_camera;
+        GrayImage::from_fn(640, 480, |x, y| {
+            let ray = cam.ray_camera([f64::from(x), f64::from(y)]);
+            let t = n.dot(&pose.centre_camera_m) / n.dot(&ray);
+            let r = (ray * t - pose.centre_camera_m).norm();
+            let g = if r < 0.15 {
+                30
+            } else if r < 0.30 {
+                150
+            } else if r < 0.33 {
+                70
+            } else {
+                170
+            };
+            Luma([g])
+        })
+    }
+
+    #[test]
+    fn the_true_pose_has_the_support() {
+        let cam = camera();
+        let n = nalgebra::Rotation3::new(Vector3::new(0.0, 0.6, 0.2)) * -Vector3::z();
+        let truth = CirclePose {
+            centre_camera_m: Vector3::new(0.1, -0.05, 3.0),
+            normal_camera: n.normalize(),
+        };
+        let image = render(&cam, &truth);
+        let good = canopy_support(&image, &cam, &truth, 0.33).unwrap();
+        assert!(good > 0.95, "true pose support {good}");
+        // A pose with the same centre and a mirrored tilt.
+        let mirrored = CirclePose {
+            normal_camera: Vector3::new(-n.x, -n.y, n.z).normalize(),
+            ..truth
+        };
+        let bad = canopy_support(&image, &cam, &mirrored, 0.33).unwrap();
+        assert!(bad < 0.5, "wrong pose support {bad}");
+        // Wrong polarity: the band's inner edge (r = 0.30) is not the rim.
+        let inner = canopy_support(&image, &cam, &truth, 0.30).unwrap();
+        assert!(inner < 0.1, "inner edge support {inner}");
+    }
+
+    #[test]
+    fn rim_outside_the_image_cannot_be_judged() {
+        let cam = camera();
+        let pose = CirclePose {
+            centre_camera_m: Vector3::new(0.0, 0.0, 0.3),
+            normal_camera: -Vector3::z(),
+        };
+        let image = GrayImage::new(640, 480);
+        assert_eq!(canopy_support(&image, &cam, &pose, 0.33), None);
+        // Far away the rim is a few pixels: no judgement either.
+        let far = CirclePose {
+            centre_camera_m: Vector3::new(0.0, 0.0, 200.0),
+            ..pose
+        };
+        assert_eq!(canopy_support(&image, &cam, &far, 0.33), None);
+        // A blank image gives no support at all.
+        let near = CirclePose {
+            centre_camera_m: Vector3::new(0.0, 0.0, 3.0),
+            ..pose
+        };
+        assert_eq!(canopy_support(&image, &cam, &near, 0.33), Some(0.0));
+    }
 }

@@ -162,7 +162,7 @@ impl Measurer {
     pub fn measure(&mut self, frame: &Frame) -> Measurement {
         let start = Instant::now();
         let mut times = StageTimes::default();
-        let hint = self.tracker.search_hint();
+        let hint = self.tracker.search_hint(frame.capture_time_ns);
         let tracked = hint.is_some();
 
         let t = Instant::now();
@@ -203,14 +203,22 @@ impl Measurer {
                 rms_residual_px: fitted.rms_residual_px,
                 score: cand.score,
             };
-            let cov_camera = pose::position_covariance_camera(
+            let inlier_points: Vec<[f64; 2]> = undistorted
+                .iter()
+                .zip(&fitted.inliers)
+                .filter(|(_, keep)| **keep)
+                .map(|(p, _)| *p)
+                .collect();
+            let uncertainty = pose::pose_uncertainty(
                 &fitted.ellipse,
                 &self.camera,
                 &choice.pose,
                 self.inner_radius_m,
                 &quality,
+                &inlier_points,
             );
-            let normal_sigma_rad = pose::normal_sigma_rad(&fitted.ellipse, &quality);
+            let cov_camera = uncertainty.position_cov_camera_m2;
+            let normal_sigma_rad = uncertainty.normal_sigma_rad;
             let position_body_m = self
                 .mount
                 .point_camera_to_body(&choice.pose.centre_camera_m);

@@ -1,15 +1,32 @@
-//! Temporal tracking: ambiguity by continuity, prediction for the ROI search,
-//! track epochs. INTERFACE STUB (issue 2, item 5).
+//! Temporal tracking: the ambiguity settled by the canopy rim or by
+//! continuity, a constant-velocity prediction of the ellipse for the ROI
+//! search, and track epochs (MAVLink `reset_counter`).
+//!
+//! A track lives while detections keep coming no more than `max_gap_ms`
+//! apart; a longer gap (or time running backwards, e.g. a replay jumping)
+//! ends it, and the next detection starts a new track with the next epoch.
 
 use super::Disambiguation;
 use super::ellipse::Ellipse;
-use super::pose::CirclePose;
+use super::pose::{CirclePose, EllipseParams, ellipse_from_params, ellipse_params};
+use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
 /// `[track]` in the config.
 #[derive(Clone, Debug, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
-pub struct TrackConfig {}
+pub struct TrackConfig {
+    /// A track without a detection for longer than this ends, milliseconds.
+    pub max_gap_ms: f64,
+    /// The canopy rim settles the ambiguity when the two solutions' supports
+    /// (0..1) differ by at least this much...
+    pub canopy_min_difference: f64,
+    /// ...and the better one has at least this support (0..1).
+    pub canopy_min_support: f64,
+    /// Continuity settles it when one solution's normal is closer to the
+    /// tracked normal than the other's by at least this, degrees.
+    pub continuity_margin_deg: f64,
+}
 
 /// The tracker's decision for one frame.
 #[derive(Clone, Copy, Debug)]
@@ -21,33 +38,296 @@ pub struct Choice {
     pub track_epoch: u32,
 }
 
-pub struct Tracker {}
+/// What the track remembers of its last detection.
+#[derive(Clone, Copy, Debug)]
+struct TrackState {
+    time_ns: u64,
+    ellipse: EllipseParams,
+    /// Rate of change of `ellipse` per second, once two detections are known.
+    velocity_per_s: Option<EllipseParams>,
+    normal_camera: Vector3<f64>,
+    /// The tracked normal came from a settled ambiguity (rim or continuity
+    /// from a settled one), so continuity may settle the next frame.
+    resolved: bool,
+}
+
+pub struct Tracker {
+    max_gap_ns: u64,
+    canopy_min_difference: f64,
+    canopy_min_support: f64,
+    continuity_margin_rad: f64,
+    track: Option<TrackState>,
+    epoch: u32,
+    tracked_before: bool,
+}
+
+fn angle(a: &Vector3<f64>, b: &Vector3<f64>) -> f64 {
+    a.cross(b).norm().atan2(a.dot(b))
+}
 
 impl Tracker {
-    pub fn new(_cfg: &TrackConfig) -> Self {
-        Self {}
+    pub fn new(cfg: &TrackConfig) -> Self {
+        // Config values are checked for range here rather than rejected: a
+        // negative or NaN gap simply means "no tracking across frames".
+        let gap_ms = if cfg.max_gap_ms.is_finite() {
+            cfg.max_gap_ms.max(0.0)
+        } else {
+            0.0
+        };
+        Self {
+            max_gap_ns: (gap_ms * 1e6) as u64,
+            canopy_min_difference: cfg.canopy_min_difference,
+            canopy_min_support: cfg.canopy_min_support,
+            continuity_margin_rad: cfg.continuity_margin_deg.to_radians(),
+            track: None,
+            epoch: 0,
+            tracked_before: false,
+        }
     }
-    /// The predicted ellipse (undistorted pixels) to search near, if tracking.
-    pub fn search_hint(&self) -> Option<Ellipse> {
-        None
+
+    /// The current track, if it is still fresh at `time_ns`.
+    fn fresh_track(&self, time_ns: u64) -> Option<&TrackState> {
+        self.track
+            .as_ref()
+            .filter(|t| time_ns >= t.time_ns && time_ns - t.time_ns <= self.max_gap_ns)
     }
-    /// Picks one of the two cone solutions and updates the track.
+
+    /// The predicted ellipse (undistorted pixels) at `capture_time_ns` to
+    /// search near, while the track is fresh: constant velocity from the last
+    /// two detections (the last ellipse itself until there are two).
+    pub fn search_hint(&self, capture_time_ns: u64) -> Option<Ellipse> {
+        let track = self.fresh_track(capture_time_ns)?;
+        let dt_s = (capture_time_ns - track.time_ns) as f64 * 1e-9;
+        let predicted = match track.velocity_per_s {
+            Some(v) => track.ellipse + v * dt_s,
+            None => track.ellipse,
+        };
+        ellipse_from_params(&predicted).or_else(|| ellipse_from_params(&track.ellipse))
+    }
+
+    /// Picks one of the two cone solutions and updates the track:
+    /// the canopy rim when it decides, else continuity with a settled track,
+    /// else unresolved (the solution nearest the track's normal, or the first,
+    /// with the other reported as `alternative`).
     pub fn choose(
         &mut self,
         solutions: [CirclePose; 2],
-        _canopy_support: [Option<f64>; 2],
-        _capture_time_ns: u64,
-        _ellipse_px: &Ellipse,
+        canopy_support: [Option<f64>; 2],
+        capture_time_ns: u64,
+        ellipse_px: &Ellipse,
     ) -> Choice {
+        let previous = self.fresh_track(capture_time_ns).copied();
+        if previous.is_none() {
+            // A new track: after an earlier one, that is a re-acquisition.
+            if self.tracked_before {
+                self.epoch = self.epoch.wrapping_add(1);
+            }
+            self.tracked_before = true;
+        }
+
+        let by_canopy = match canopy_support {
+            [Some(s0), Some(s1)]
+                if s0.max(s1) >= self.canopy_min_support
+                    && (s0 - s1).abs() >= self.canopy_min_difference =>
+            {
+                Some(if s0 >= s1 { 0 } else { 1 })
+            }
+            _ => None,
+        };
+        let nearest_to_track = previous.map(|t| {
+            let a0 = angle(&solutions[0].normal_camera, &t.normal_camera);
+            let a1 = angle(&solutions[1].normal_camera, &t.normal_camera);
+            let apart = angle(&solutions[0].normal_camera, &solutions[1].normal_camera);
+            // Decisive if one is clearly nearer, or if the two solutions are
+            // the same pose to within the margin (then either is right).
+            let decisive =
+                (a0 - a1).abs() >= self.continuity_margin_rad || apart < self.continuity_margin_rad;
+            (if a0 <= a1 { 0 } else { 1 }, decisive && t.resolved)
+        });
+        let (index, how) = match (by_canopy, nearest_to_track) {
+            (Some(i), _) => (i, Disambiguation::CanopyRim),
+            (None, Some((i, true))) => (i, Disambiguation::Continuity),
+            (None, Some((i, false))) => (i, Disambiguation::Unresolved),
+            (None, None) => (0, Disambiguation::Unresolved),
+        };
+        let pose = solutions[index];
+
+        let params = ellipse_params(ellipse_px);
+        let velocity_per_s = previous.and_then(|t| {
+            let dt_s = (capture_time_ns - t.time_ns) as f64 * 1e-9;
+            (dt_s > 0.0).then(|| (params - t.ellipse) / dt_s)
+        });
+        self.track = Some(TrackState {
+            time_ns: capture_time_ns,
+            ellipse: params,
+            velocity_per_s,
+            normal_camera: pose.normal_camera,
+            resolved: how != Disambiguation::Unresolved,
+        });
         Choice {
-            pose: solutions[0],
-            alternative: Some(solutions[1]),
-            how: Disambiguation::Unresolved,
-            track_epoch: 0,
+            pose,
+            alternative: (how == Disambiguation::Unresolved).then_some(solutions[1 - index]),
+            how,
+            track_epoch: self.epoch,
         }
     }
-    /// Forgets the track entirely.
-    pub fn reset(&mut self) {}
-    /// No detection in this frame.
-    pub fn lost(&mut self, _capture_time_ns: u64) {}
+
+    /// Forgets the track entirely (the epoch starts again from 0).
+    pub fn reset(&mut self) {
+        self.track = None;
+        self.epoch = 0;
+        self.tracked_before = false;
+    }
+
+    /// No detection in the frame captured at `capture_time_ns`: the track
+    /// ends once the gap since its last detection exceeds `max_gap_ms`.
+    pub fn lost(&mut self, capture_time_ns: u64) {
+        if self.fresh_track(capture_time_ns).is_none() {
+            self.track = None;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const MS: u64 = 1_000_000;
+
+    fn config() -> TrackConfig {
+        TrackConfig {
+            max_gap_ms: 500.0,
+            canopy_min_difference: 0.2,
+            canopy_min_support: 0.5,
+            continuity_margin_deg: 3.0,
+        }
+    }
+
+    fn pose(nx: f64) -> CirclePose {
+        CirclePose {
+            centre_camera_m: Vector3::new(0.0, 0.0, 5.0),
+            normal_camera: Vector3::new(nx, 0.0, -1.0).normalize(),
+        }
+    }
+
+    fn ellipse(cx: f64) -> Ellipse {
+        Ellipse::new(cx, 200.0, 50.0, 30.0, 0.2)
+    }
+
+    #[test]
+    fn canopy_then_continuity_then_unresolved_after_a_loss() {
+        let mut t = Tracker::new(&config());
+        // Frame 1: the rim supports the second solution.
+        let c = t.choose(
+            [pose(0.5), pose(-0.5)],
+            [Some(0.1), Some(0.9)],
+            0,
+            &ellipse(100.0),
+        );
+        assert_eq!(c.how, Disambiguation::CanopyRim);
+        assert_eq!(c.pose, pose(-0.5));
+        assert!(c.alternative.is_none());
+        assert_eq!(c.track_epoch, 0);
+        // Frame 2: rim hidden; continuity keeps the same branch even though
+        // the solutions come in the other order.
+        let c = t.choose(
+            [pose(0.48), pose(-0.48)],
+            [None, None],
+            40 * MS,
+            &ellipse(104.0),
+        );
+        assert_eq!(c.how, Disambiguation::Continuity);
+        assert_eq!(c.pose, pose(-0.48));
+        // Undecided rim (both supported alike) still leaves it to continuity.
+        let c = t.choose(
+            [pose(-0.47), pose(0.47)],
+            [Some(0.8), Some(0.75)],
+            80 * MS,
+            &ellipse(108.0),
+        );
+        assert_eq!(c.how, Disambiguation::Continuity);
+        assert_eq!(c.pose, pose(-0.47));
+        // Lost for longer than the gap: the track ends; a new one is unresolved.
+        t.lost(200 * MS);
+        assert!(t.search_hint(300 * MS).is_some(), "still within the gap");
+        t.lost(700 * MS);
+        assert!(t.search_hint(700 * MS).is_none());
+        let c = t.choose(
+            [pose(0.4), pose(-0.4)],
+            [None, None],
+            720 * MS,
+            &ellipse(50.0),
+        );
+        assert_eq!(c.how, Disambiguation::Unresolved);
+        assert_eq!(c.alternative, Some(pose(-0.4)));
+        assert_eq!(c.track_epoch, 1);
+        // An unresolved track stays unresolved by continuity alone, but keeps
+        // to the same branch.
+        let c = t.choose(
+            [pose(-0.41), pose(0.41)],
+            [None, None],
+            760 * MS,
+            &ellipse(52.0),
+        );
+        assert_eq!(c.how, Disambiguation::Unresolved);
+        assert_eq!(c.pose, pose(0.41));
+        // reset forgets everything.
+        t.reset();
+        assert!(t.search_hint(800 * MS).is_none());
+        let c = t.choose(
+            [pose(0.4), pose(-0.4)],
+            [None, None],
+            800 * MS,
+            &ellipse(50.0),
+        );
+        assert_eq!(c.track_epoch, 0);
+    }
+
+    #[test]
+    fn prediction_is_constant_velocity() {
+        let mut t = Tracker::new(&config());
+        assert!(t.search_hint(0).is_none());
+        t.choose([pose(0.3), pose(-0.3)], [None, None], 0, &ellipse(100.0));
+        // One detection: the hint is the last ellipse.
+        let h = t.search_hint(40 * MS).unwrap();
+        assert!(h.max_param_error_px(&ellipse(100.0)) < 1e-9);
+        t.choose(
+            [pose(0.3), pose(-0.3)],
+            [None, None],
+            40 * MS,
+            &Ellipse::new(110.0, 196.0, 52.0, 31.0, 0.2),
+        );
+        // 10 px / 40 ms right, 4 px / 40 ms up, axes growing: 80 ms later.
+        let h = t.search_hint(120 * MS).unwrap();
+        let expected = Ellipse::new(130.0, 188.0, 56.0, 33.0, 0.2);
+        assert!(h.max_param_error_px(&expected) < 1e-6, "{h:?}");
+        assert!(h.theta_error_rad(&expected) < 1e-9);
+        // Time running backwards ends the track.
+        assert!(t.search_hint(10 * MS).is_none());
+        t.lost(10 * MS);
+        let c = t.choose(
+            [pose(0.3), pose(-0.3)],
+            [None, None],
+            20 * MS,
+            &ellipse(1.0),
+        );
+        assert_eq!(c.track_epoch, 1);
+    }
+
+    #[test]
+    fn weak_or_equal_rim_support_does_not_decide() {
+        let mut t = Tracker::new(&config());
+        // Both weak (rim hidden): no decision even with a large difference
+        // in relative terms.
+        let c = t.choose(
+            [pose(0.5), pose(-0.5)],
+            [Some(0.05), Some(0.3)],
+            0,
+            &ellipse(1.0),
+        );
+        assert_eq!(c.how, Disambiguation::Unresolved);
+        t.reset();
+        let c = t.choose([pose(0.5), pose(-0.5)], [Some(0.9), None], 0, &ellipse(1.0));
+        assert_eq!(c.how, Disambiguation::Unresolved);
+    }
 }
