@@ -69,6 +69,12 @@ pub struct Blob {
     pub mean_level: f64,
     /// Area over the moment ellipse's area: about 1 for a filled ellipse.
     pub fill: f64,
+    /// The region's deepest point (farthest from its border), full-res
+    /// pixels, and that distance (the inscribed radius), full-res pixels.
+    /// Unlike the centroid, it stays on the disc when a long hose or probe
+    /// merges with it.
+    pub core_px: [f64; 2],
+    pub core_radius_px: f64,
 }
 
 /// The level below which `fraction` of the pixels lie.
@@ -93,6 +99,10 @@ fn percentile(pixels: &[u8], fraction: f64) -> u8 {
 pub struct BlobFinder {
     labels: Vec<u32>,
     stack: Vec<u32>,
+    distance: Vec<u32>,
+    /// Per label: index into the output, and the deepest pixel.
+    label_out: Vec<Option<usize>>,
+    deepest: Vec<(u32, usize)>,
 }
 
 impl BlobFinder {
@@ -128,6 +138,9 @@ impl BlobFinder {
         self.labels.clear();
         self.labels.resize(w * h, 0);
         let dark = |i: usize| f64::from(img.pixels[i]) <= threshold;
+        let first_out = out.len();
+        self.label_out.clear();
+        self.label_out.push(None);
         let mut next = 1u32;
         for start in 0..w * h {
             if self.labels[start] != 0 || !dark(start) {
@@ -165,8 +178,10 @@ impl BlobFinder {
             }
             next += 1;
             if n < min_area {
+                self.label_out.push(None);
                 continue;
             }
+            self.label_out.push(Some(out.len()));
             let nf = n as f64;
             let (mx, my) = (sx / nf, sy / nf);
             // Second central moments; a filled ellipse has variance a^2/4
@@ -189,7 +204,80 @@ impl BlobFinder {
                 area: n,
                 mean_level: sl / nf,
                 fill: nf / (std::f64::consts::PI * a * b),
+                core_px: [0.0; 2],
+                core_radius_px: 0.0,
             });
+        }
+        if out.len() > first_out {
+            self.deepest_points(img, first_out, out);
+        }
+    }
+
+    /// Chamfer (3-4) distance of every dark pixel to the nearest non-dark
+    /// pixel or the image border, and each region's deepest pixel.
+    fn deepest_points(&mut self, img: &Decimated, first_out: usize, out: &mut [Blob]) {
+        let (w, h) = (img.width, img.height);
+        let d = &mut self.distance;
+        d.clear();
+        d.resize(w * h, 0);
+        let labels = &self.labels;
+        let inf = u32::MAX / 2;
+        for i in 0..w * h {
+            if labels[i] != 0 {
+                d[i] = inf;
+            }
+        }
+        let at = |d: &Vec<u32>, x: i64, y: i64| -> u32 {
+            if x < 0 || y < 0 || x >= w as i64 || y >= h as i64 {
+                0
+            } else {
+                d[y as usize * w + x as usize]
+            }
+        };
+        for y in 0..h as i64 {
+            for x in 0..w as i64 {
+                let i = y as usize * w + x as usize;
+                if d[i] == 0 {
+                    continue;
+                }
+                let v = d[i]
+                    .min(at(d, x - 1, y) + 3)
+                    .min(at(d, x, y - 1) + 3)
+                    .min(at(d, x - 1, y - 1) + 4)
+                    .min(at(d, x + 1, y - 1) + 4);
+                d[i] = v;
+            }
+        }
+        for y in (0..h as i64).rev() {
+            for x in (0..w as i64).rev() {
+                let i = y as usize * w + x as usize;
+                if d[i] == 0 {
+                    continue;
+                }
+                let v = d[i]
+                    .min(at(d, x + 1, y) + 3)
+                    .min(at(d, x, y + 1) + 3)
+                    .min(at(d, x + 1, y + 1) + 4)
+                    .min(at(d, x - 1, y + 1) + 4);
+                d[i] = v;
+            }
+        }
+        self.deepest.clear();
+        self.deepest.resize(out.len() - first_out, (0, 0));
+        for i in 0..w * h {
+            if let Some(Some(o)) = self.label_out.get(labels[i] as usize) {
+                let slot = &mut self.deepest[o - first_out];
+                if d[i] > slot.0 {
+                    *slot = (d[i], i);
+                }
+            }
+        }
+        let f = img.factor as f64;
+        for (blob, &(dist, i)) in out[first_out..].iter_mut().zip(&self.deepest) {
+            blob.core_px = img.to_full((i % w) as f64, (i / w) as f64);
+            // Chamfer units are 3 per pixel; the distance counts to the
+            // centre of the first outside pixel, half a pixel too far.
+            blob.core_radius_px = ((f64::from(dist) / 3.0) - 0.5).max(0.5) * f;
         }
     }
 }

@@ -77,6 +77,17 @@ pub struct RimCandidate {
     pub ellipse_px: Ellipse,
 }
 
+/// Where and how large a coarse candidate is, full-res distorted pixels.
+#[derive(Clone, Debug)]
+struct Seed {
+    centre_px: [f64; 2],
+    a_px: f64,
+    b_px: f64,
+    theta: f64,
+    /// How far the first ray pass looks, in multiples of the seed's radius.
+    reach: f64,
+}
+
 /// A verified candidate.
 struct Verified {
     ellipse: Ellipse,
@@ -153,7 +164,7 @@ impl Detector {
         // Smallest disc: a third of its area must make dark blocks.
         let min_area = ((std::f64::consts::PI * (self.min_radius_px / f).powi(2)) / 3.0)
             .floor()
-            .max(1.0) as usize;
+            .max(2.0) as usize;
         let mut blobs = std::mem::take(&mut self.blobs);
         self.finder.find(
             &self.decimated,
@@ -163,7 +174,9 @@ impl Detector {
             &mut blobs,
         );
         blobs.retain(|b| b.a_px >= 0.5 * self.min_radius_px && b.b_px >= 0.5);
-        blobs.sort_by(|x, y| y.fill.min(1.0).total_cmp(&x.fill.min(1.0)));
+        // Larger dark regions first: small ones are mostly noise and thin
+        // shapes, and the budget of candidates is limited.
+        blobs.sort_by(|x, y| y.area.cmp(&x.area));
         // Drop near-duplicates (the same region at several thresholds).
         let mut kept: Vec<Blob> = Vec::new();
         for b in blobs.drain(..) {
@@ -180,9 +193,35 @@ impl Detector {
         }
         let mut best: Option<Verified> = None;
         for (i, b) in kept.iter().enumerate() {
-            if let Some(v) = self.verify_blob(image, b, i as u64) {
-                if best.as_ref().is_none_or(|bv| v.score > bv.score) {
-                    best = Some(v);
+            // Two seeds: the centroid with the moment ellipse, and the
+            // deepest point with its inscribed circle (on the disc even when
+            // a hose or probe has merged with it).
+            let mut seeds = vec![Seed {
+                centre_px: b.centre_px,
+                a_px: b.a_px,
+                b_px: b.b_px,
+                theta: b.theta,
+                reach: 1.8,
+            }];
+            let off = (b.core_px[0] - b.centre_px[0]).hypot(b.core_px[1] - b.centre_px[1]);
+            if off > 0.3 * b.core_radius_px {
+                seeds.push(Seed {
+                    centre_px: b.core_px,
+                    a_px: b.core_radius_px,
+                    b_px: b.core_radius_px,
+                    theta: 0.0,
+                    reach: 3.0,
+                });
+            }
+            for (j, seed) in seeds.iter().enumerate() {
+                let r = self.verify_seed(image, seed, 2 * i as u64 + j as u64);
+                if std::env::var_os("DETECT_DEBUG").is_some() {
+                    eprintln!("seed {seed:?} -> {:?}", r.as_ref().map(|v| (v.ellipse, v.score)));
+                }
+                if let Some(v) = r {
+                    if best.as_ref().is_none_or(|bv| v.score > bv.score) {
+                        best = Some(v);
+                    }
                 }
             }
         }
@@ -190,29 +229,28 @@ impl Detector {
         best
     }
 
-    /// Verifies a coarse blob: a wide ray pass from its centroid, a robust
+    /// Verifies a coarse seed: a wide ray pass from its centre, a robust
     /// fit, then the narrow pass around that fit.
-    fn verify_blob(&mut self, image: &GrayImage, blob: &Blob, index: u64) -> Option<Verified> {
+    fn verify_seed(&mut self, image: &GrayImage, seed: &Seed, index: u64) -> Option<Verified> {
         let rays = 64;
         let mut points = Vec::with_capacity(rays);
+        let c = seed.centre_px;
         for k in 0..rays {
             let phi = TAU * k as f64 / rays as f64;
-            let r = polar_radius(blob.a_px, blob.b_px, blob.theta, phi);
+            let r = polar_radius(seed.a_px, seed.b_px, seed.theta, phi);
             let dir = [phi.cos(), phi.sin()];
-            rim::profile(image, blob.centre_px, dir, 1.0, 1.8 * r + 4.0, 0.5, &mut self.profile);
+            let s_max = seed.reach * r + 4.0;
+            rim::profile(image, c, dir, 1.0, s_max, 0.5, &mut self.profile);
             if let Some(e) = rim::strongest_rise(&self.profile, 1.0, 0.5, self.cfg.min_contrast_gray as f32)
             {
-                let p = [
-                    blob.centre_px[0] + e.s * dir[0],
-                    blob.centre_px[1] + e.s * dir[1],
-                ];
+                let p = [c[0] + e.s * dir[0], c[1] + e.s * dir[1]];
                 points.push(self.camera.undistort_px(p));
             }
         }
         if points.len() < 8 {
             return None;
         }
-        let scale = blob.b_px.max(1.0);
+        let scale = seed.b_px.max(1.0);
         let tolerance = (0.03 * scale).max(1.0);
         let first = conic_fit::refine(&conic_fit::fit_ellipse(&points)?, &points, 3.0 * tolerance, 1)
             .and_then(|e| conic_fit::refine(&e, &points, tolerance, 2))
