@@ -1,0 +1,160 @@
+//! A small, fast robust ellipse fit used only to verify and rank candidates
+//! (is this edge set an ellipse, and where should the rim search look?).
+//! The measurement's own fit (RANSAC + clustering, unbiased refit) is the fit
+//! module's job: this one only has to be right to a fraction of a pixel.
+
+use crate::measure::ellipse::{Conic, Ellipse};
+use nalgebra::{Matrix3, Matrix6, Vector6};
+use rand::Rng;
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+
+/// Algebraic least-squares conic (unit coefficient norm) of the points, in
+/// coordinates normalised to their centroid and RMS radius so that the
+/// problem is well conditioned. Returns `None` when the points do not
+/// determine an ellipse.
+pub fn fit_conic(points: &[[f64; 2]]) -> Option<Conic> {
+    if points.len() < 5 {
+        return None;
+    }
+    let n = points.len() as f64;
+    let (mx, my) = points
+        .iter()
+        .fold((0.0, 0.0), |(x, y), p| (x + p[0] / n, y + p[1] / n));
+    let rms = (points
+        .iter()
+        .map(|p| (p[0] - mx).powi(2) + (p[1] - my).powi(2))
+        .sum::<f64>()
+        / n)
+        .sqrt();
+    if !(rms > 1e-9 && rms.is_finite()) {
+        return None;
+    }
+    let s = 1.0 / rms;
+    let mut scatter = Matrix6::<f64>::zeros();
+    for p in points {
+        let (x, y) = ((p[0] - mx) * s, (p[1] - my) * s);
+        let row = Vector6::new(x * x, x * y, y * y, x, y, 1.0);
+        scatter += row * row.transpose();
+    }
+    let eig = scatter.symmetric_eigen();
+    let (imin, _) = eig
+        .eigenvalues
+        .iter()
+        .enumerate()
+        .min_by(|a, b| a.1.total_cmp(b.1))?;
+    let v = eig.eigenvectors.column(imin);
+    let normalised = Conic {
+        a: v[0],
+        b: v[1],
+        c: v[2],
+        d: v[3],
+        e: v[4],
+        f: v[5],
+    };
+    // Back to pixels: x' = T x with T = [[s,0,-s mx],[0,s,-s my],[0,0,1]].
+    let t = Matrix3::new(s, 0.0, -s * mx, 0.0, s, -s * my, 0.0, 0.0, 1.0);
+    let m = t.transpose() * normalised.matrix() * t;
+    Some(Conic::from_matrix(&m))
+}
+
+/// The ellipse of [`fit_conic`].
+pub fn fit_ellipse(points: &[[f64; 2]]) -> Option<Ellipse> {
+    fit_conic(points)?.to_ellipse()
+}
+
+/// Geometric distances (Sampson approximation) of the points to an ellipse.
+pub fn residuals(ellipse: &Ellipse, points: &[[f64; 2]], out: &mut Vec<f64>) {
+    let conic = ellipse.to_conic();
+    out.clear();
+    out.extend(points.iter().map(|p| conic.sampson_distance(p[0], p[1])));
+}
+
+/// RANSAC over 5-point subsets, then a least-squares refit on the inliers
+/// (points within `tolerance_px`). Deterministic for a given seed.
+pub fn ransac_ellipse(
+    points: &[[f64; 2]],
+    tolerance_px: f64,
+    iterations: usize,
+    seed: u64,
+) -> Option<Ellipse> {
+    if points.len() < 5 {
+        return None;
+    }
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let mut best: Option<(usize, Ellipse)> = None;
+    let mut sample = [[0.0; 2]; 5];
+    for _ in 0..iterations {
+        for slot in sample.iter_mut() {
+            *slot = points[rng.random_range(0..points.len())];
+        }
+        let Some(conic) = fit_conic(&sample) else {
+            continue;
+        };
+        if conic.to_ellipse().is_none() {
+            continue;
+        }
+        let count = points
+            .iter()
+            .filter(|p| conic.sampson_distance(p[0], p[1]) <= tolerance_px)
+            .count();
+        if best.as_ref().is_none_or(|(c, _)| count > *c) {
+            if let Some(e) = conic.to_ellipse() {
+                best = Some((count, e));
+            }
+        }
+    }
+    let (_, model) = best?;
+    refine(&model, points, tolerance_px, 3)
+}
+
+/// Iterated trimmed refit: keeps the points within `tolerance_px` of the
+/// current ellipse and refits them, a few times.
+pub fn refine(
+    start: &Ellipse,
+    points: &[[f64; 2]],
+    tolerance_px: f64,
+    rounds: usize,
+) -> Option<Ellipse> {
+    let mut current = *start;
+    let mut kept = Vec::with_capacity(points.len());
+    for _ in 0..rounds {
+        let conic = current.to_conic();
+        kept.clear();
+        kept.extend(
+            points
+                .iter()
+                .filter(|p| conic.sampson_distance(p[0], p[1]) <= tolerance_px),
+        );
+        if kept.len() < 5 {
+            return None;
+        }
+        current = fit_ellipse(&kept)?;
+    }
+    Some(current)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn exact_points_give_the_exact_ellipse() {
+        let truth = Ellipse::new(412.3, 287.9, 95.0, 51.5, 0.61);
+        let pts: Vec<[f64; 2]> = (0..40).map(|k| truth.point_at(k as f64 * 0.157)).collect();
+        let e = fit_ellipse(&pts).unwrap();
+        assert!(truth.max_param_error_px(&e) < 1e-6, "{e:?}");
+    }
+
+    #[test]
+    fn ransac_ignores_a_straight_line_of_outliers() {
+        let truth = Ellipse::new(200.0, 150.0, 60.0, 40.0, -0.3);
+        // 60 % of the rim, then 30 points on a line through it (a probe side).
+        let mut pts: Vec<[f64; 2]> = (0..60)
+            .map(|k| truth.point_at(k as f64 * 0.6 * std::f64::consts::TAU / 60.0))
+            .collect();
+        pts.extend((0..30).map(|k| [150.0 + k as f64 * 3.0, 190.0 + k as f64 * 0.5]));
+        let e = ransac_ellipse(&pts, 1.0, 200, 7).unwrap();
+        assert!(truth.max_param_error_px(&e) < 1e-6, "{e:?}");
+    }
+}

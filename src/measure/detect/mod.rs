@@ -1,0 +1,406 @@
+//! Detection of the drogue's dark inner circle: sub-pixel rim edge points.
+//!
+//! 1. `coarse`: dark connected regions of a decimated frame, at a few
+//!    thresholds, give candidate centres and sizes (cheap, whole frame).
+//! 2. `rim`: rays from a candidate centre at full resolution give one
+//!    sub-pixel dark-to-light edge each; a quick robust ellipse fit
+//!    (`conic_fit`) of them moves the centre onto the disc, and a second,
+//!    narrow ray pass around that ellipse gives the rim points.
+//! 3. Evidence ranks the candidates: the share of rays whose edge lies on one
+//!    ellipse (shape), a plausible size and axis ratio (range, tilt), enough
+//!    contrast, and the canopy's darker outer rim band beyond the edge.
+//!
+//! With a tracking hint only step 2's narrow pass runs, around the
+//! predicted ellipse; the full search follows only when that fails.
+
+mod coarse;
+pub mod conic_fit;
+pub mod rim;
+
+use super::ellipse::Ellipse;
+use crate::camera::CameraModel;
+use coarse::{Blob, BlobFinder, Decimated};
+use image::GrayImage;
+use serde::{Deserialize, Serialize};
+use std::f64::consts::TAU;
+
+/// Detection tunables (`[detect]` in the config).
+#[derive(Clone, Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DetectConfig {
+    /// Block size of the decimated image used for the coarse search.
+    pub decimation: u32,
+    /// Dark-region thresholds, as fractions of the way from the frame's
+    /// darkest level to its median level.
+    pub threshold_fractions: Vec<f64>,
+    /// Most coarse candidates verified at full resolution per frame.
+    pub max_candidates: u32,
+    /// Range limits of the drogue, metres: they bound the disc's size in pixels.
+    pub min_range_m: f64,
+    pub max_range_m: f64,
+    /// Smallest minor/major axis ratio accepted (cos of the largest tilt).
+    pub min_axis_ratio: f64,
+    /// Smallest dark-to-light step at the rim, gray levels.
+    pub min_contrast_gray: f64,
+    /// Spacing of the rim rays along the rim, pixels.
+    pub rim_point_spacing_px: f64,
+    /// Most rim points per frame.
+    pub max_rim_points: u32,
+    /// Fewest rim points on the ellipse for a detection.
+    pub min_rim_points: u32,
+    /// Edge distance from the candidate's ellipse counted as "on the rim", pixels.
+    pub inlier_tolerance_px: f64,
+    /// Radius range (multiples of the disc's) searched for the canopy's outer rim band.
+    pub canopy_band_ratio: [f64; 2],
+    /// Weight of the canopy band evidence in the score (0..1).
+    pub canopy_weight: f64,
+    /// Disc radius (pixels) from which the canopy band must be seen: below it
+    /// the band is too thin to resolve.
+    pub canopy_required_from_px: f64,
+    /// Smallest share of rim rays showing the canopy band, when required.
+    pub min_canopy_fraction: f64,
+    /// Smallest score (0..1) for a detection.
+    pub min_score: f64,
+    /// Seed of the random sampling (the detection is deterministic).
+    pub seed: u64,
+}
+
+/// The best candidate of a frame.
+#[derive(Clone, Debug)]
+pub struct RimCandidate {
+    /// Sub-pixel rim points, distorted image pixels (as in the frame).
+    pub rim_points_px: Vec<[f64; 2]>,
+    /// Evidence 0..1 (dark inside, light canopy around, ellipse shape, size).
+    pub score: f64,
+    /// The detector's own quick ellipse of the rim, undistorted pixels: a
+    /// starting point, not the measurement (that is the fit module's).
+    pub ellipse_px: Ellipse,
+}
+
+/// Where and how large a coarse candidate is, full-res distorted pixels.
+#[derive(Clone, Debug)]
+struct Seed {
+    centre_px: [f64; 2],
+    a_px: f64,
+    b_px: f64,
+    theta: f64,
+    /// How far the first ray pass looks, in multiples of the seed's radius.
+    reach: f64,
+}
+
+/// A verified candidate.
+struct Verified {
+    ellipse: Ellipse,
+    points_px: Vec<[f64; 2]>,
+    score: f64,
+}
+
+/// Finds the dark inner circle. Holds scratch buffers between frames.
+pub struct Detector {
+    cfg: DetectConfig,
+    camera: CameraModel,
+    /// Disc radius limits in pixels, from the range limits.
+    min_radius_px: f64,
+    max_radius_px: f64,
+    decimated: Decimated,
+    finder: BlobFinder,
+    blobs: Vec<Blob>,
+    profile: Vec<f32>,
+}
+
+/// Radius of an ellipse (centred at the origin) in direction `phi`.
+fn polar_radius(a: f64, b: f64, theta: f64, phi: f64) -> f64 {
+    let (s, c) = (phi - theta).sin_cos();
+    let inv2 = (c / a).powi(2) + (s / b).powi(2);
+    1.0 / inv2.sqrt()
+}
+
+fn median(values: &mut [f64]) -> f64 {
+    if values.is_empty() {
+        return 0.0;
+    }
+    let mid = values.len() / 2;
+    *values.select_nth_unstable_by(mid, f64::total_cmp).1
+}
+
+impl Detector {
+    pub fn new(cfg: &DetectConfig, camera: &CameraModel, inner_radius_m: f64) -> Self {
+        let f = camera.fx().max(camera.fy());
+        let min_range = cfg.min_range_m.max(1e-3);
+        let max_range = cfg.max_range_m.max(min_range);
+        Self {
+            cfg: cfg.clone(),
+            camera: camera.clone(),
+            min_radius_px: f * inner_radius_m / max_range,
+            max_radius_px: f * inner_radius_m / min_range,
+            decimated: Decimated::default(),
+            finder: BlobFinder::default(),
+            blobs: Vec::new(),
+            profile: Vec::new(),
+        }
+    }
+
+    /// The best candidate, or `None` when the frame shows no drogue.
+    /// `hint`: the tracker's predicted ellipse (undistorted pixels); search near
+    /// it first, and the full frame when it is not found there.
+    pub fn detect(&mut self, image: &GrayImage, hint: Option<&Ellipse>) -> Option<RimCandidate> {
+        if image.width() < 8 || image.height() < 8 {
+            return None;
+        }
+        if let Some(h) = hint.filter(|h| h.a.is_finite() && h.b > 0.5 && h.a < 1e5) {
+            if let Some(v) = self.verify_near(image, h, true) {
+                return Some(v.into_candidate());
+            }
+        }
+        self.search_full(image).map(Verified::into_candidate)
+    }
+
+    /// Coarse search over the whole frame, then verification of the best
+    /// coarse candidates.
+    fn search_full(&mut self, image: &GrayImage) -> Option<Verified> {
+        self.decimated
+            .update(image, self.cfg.decimation.clamp(1, 16) as usize);
+        let f = self.decimated.factor as f64;
+        // Smallest disc: a third of its area must make dark blocks.
+        let min_area = ((std::f64::consts::PI * (self.min_radius_px / f).powi(2)) / 3.0)
+            .floor()
+            .max(2.0) as usize;
+        let mut blobs = std::mem::take(&mut self.blobs);
+        self.finder.find(
+            &self.decimated,
+            &self.cfg.threshold_fractions,
+            min_area,
+            self.cfg.min_contrast_gray,
+            &mut blobs,
+        );
+        blobs.retain(|b| b.a_px >= 0.5 * self.min_radius_px && b.b_px >= 0.5);
+        // Larger dark regions first: small ones are mostly noise and thin
+        // shapes, and the budget of candidates is limited.
+        blobs.sort_by(|x, y| y.area.cmp(&x.area));
+        // Drop near-duplicates (the same region at several thresholds).
+        let mut kept: Vec<Blob> = Vec::new();
+        for b in blobs.drain(..) {
+            let dup = kept.iter().any(|k| {
+                let d = (k.centre_px[0] - b.centre_px[0]).hypot(k.centre_px[1] - b.centre_px[1]);
+                d < 0.25 * k.b_px.min(b.b_px) && (k.a_px / b.a_px - 1.0).abs() < 0.25
+            });
+            if !dup {
+                kept.push(b);
+            }
+            if kept.len() >= self.cfg.max_candidates as usize {
+                break;
+            }
+        }
+        let mut best: Option<Verified> = None;
+        for (i, b) in kept.iter().enumerate() {
+            // Two seeds: the centroid with the moment ellipse, and the
+            // deepest point with its inscribed circle (on the disc even when
+            // a hose or probe has merged with it).
+            let mut seeds = vec![Seed {
+                centre_px: b.centre_px,
+                a_px: b.a_px,
+                b_px: b.b_px,
+                theta: b.theta,
+                reach: 1.8,
+            }];
+            let off = (b.core_px[0] - b.centre_px[0]).hypot(b.core_px[1] - b.centre_px[1]);
+            if off > 0.3 * b.core_radius_px {
+                seeds.push(Seed {
+                    centre_px: b.core_px,
+                    a_px: b.core_radius_px,
+                    b_px: b.core_radius_px,
+                    theta: 0.0,
+                    reach: 3.0,
+                });
+            }
+            for (j, seed) in seeds.iter().enumerate() {
+                let r = self.verify_seed(image, seed, 2 * i as u64 + j as u64);
+                if std::env::var_os("DETECT_DEBUG").is_some() {
+                    eprintln!("seed {seed:?} -> {:?}", r.as_ref().map(|v| (v.ellipse, v.score)));
+                }
+                if let Some(v) = r {
+                    if best.as_ref().is_none_or(|bv| v.score > bv.score) {
+                        best = Some(v);
+                    }
+                }
+            }
+        }
+        self.blobs = kept;
+        best
+    }
+
+    /// Verifies a coarse seed: a wide ray pass from its centre, a robust
+    /// fit, then the narrow pass around that fit.
+    fn verify_seed(&mut self, image: &GrayImage, seed: &Seed, index: u64) -> Option<Verified> {
+        let rays = 64;
+        let mut points = Vec::with_capacity(rays);
+        let c = seed.centre_px;
+        for k in 0..rays {
+            let phi = TAU * k as f64 / rays as f64;
+            let r = polar_radius(seed.a_px, seed.b_px, seed.theta, phi);
+            let dir = [phi.cos(), phi.sin()];
+            let s_max = seed.reach * r + 4.0;
+            rim::profile(image, c, dir, 1.0, s_max, 0.5, &mut self.profile);
+            if let Some(e) = rim::strongest_rise(&self.profile, 1.0, 0.5, self.cfg.min_contrast_gray as f32)
+            {
+                let p = [c[0] + e.s * dir[0], c[1] + e.s * dir[1]];
+                points.push(self.camera.undistort_px(p));
+            }
+        }
+        if points.len() < 8 {
+            return None;
+        }
+        let scale = seed.b_px.max(1.0);
+        let tolerance = (0.03 * scale).max(1.0);
+        let first = conic_fit::refine(&conic_fit::fit_ellipse(&points)?, &points, 3.0 * tolerance, 1)
+            .and_then(|e| conic_fit::refine(&e, &points, tolerance, 2))
+            .filter(|e| {
+                let c = e.to_conic();
+                let n = points
+                    .iter()
+                    .filter(|p| c.sampson_distance(p[0], p[1]) <= tolerance)
+                    .count();
+                n as f64 >= 0.8 * points.len() as f64
+            })
+            .or_else(|| {
+                conic_fit::ransac_ellipse(&points, tolerance, 150, self.cfg.seed ^ index)
+            })?;
+        if !self.plausible(&first, 0.5) {
+            return None;
+        }
+        let mut v = self.verify_near(image, &first, false)?;
+        // A centre that moved a lot (the first pass started off the disc):
+        // one more narrow pass from the new centre.
+        let moved = (v.ellipse.cx - first.cx).hypot(v.ellipse.cy - first.cy);
+        if moved > 0.1 * v.ellipse.b {
+            let again = v.ellipse;
+            v = self.verify_near(image, &again, false)?;
+        }
+        Some(v)
+    }
+
+    /// Size and shape plausible for the disc (`slack` widens the limits).
+    fn plausible(&self, e: &Ellipse, slack: f64) -> bool {
+        e.a.is_finite()
+            && e.b > 0.0
+            && e.a <= 2.0 * self.max_radius_px / slack
+            && e.a >= slack * 0.8 * self.min_radius_px
+            && e.b / e.a >= self.cfg.min_axis_ratio * slack
+    }
+
+    /// Narrow ray pass around an ellipse (undistorted pixels), robust refit,
+    /// and the evidence score.
+    fn verify_near(&mut self, image: &GrayImage, start: &Ellipse, tracked: bool) -> Option<Verified> {
+        let centre = self.camera.distort_px([start.cx, start.cy]);
+        let perimeter = TAU * ((start.a * start.a + start.b * start.b) / 2.0).sqrt();
+        let rays = ((perimeter / self.cfg.rim_point_spacing_px.max(0.1)) as usize)
+            .clamp(24, self.cfg.max_rim_points.max(24) as usize);
+        let min_contrast = self.cfg.min_contrast_gray as f32;
+        let (w, h) = (f64::from(image.width()), f64::from(image.height()));
+        let inside = |p: [f64; 2]| p[0] >= 0.0 && p[1] >= 0.0 && p[0] <= w - 1.0 && p[1] <= h - 1.0;
+
+        let mut points_px = Vec::with_capacity(rays);
+        let mut undistorted = Vec::with_capacity(rays);
+        let mut contrasts = Vec::with_capacity(rays);
+        let mut dirs = Vec::with_capacity(rays);
+        let mut rays_in_image = 0usize;
+        for k in 0..rays {
+            let phi = TAU * k as f64 / rays as f64;
+            let r = polar_radius(start.a, start.b, start.theta, phi);
+            let margin = (0.2 * r).clamp(4.0, 30.0);
+            let dir = [phi.cos(), phi.sin()];
+            let (s0, s1) = ((r - margin).max(0.5), r + margin);
+            let far = [centre[0] + s1 * dir[0], centre[1] + s1 * dir[1]];
+            let near = [centre[0] + s0 * dir[0], centre[1] + s0 * dir[1]];
+            if !(inside(far) && inside(near)) {
+                continue;
+            }
+            rays_in_image += 1;
+            rim::profile(image, centre, dir, s0, s1, 0.5, &mut self.profile);
+            if let Some(e) = rim::strongest_rise(&self.profile, s0, 0.5, min_contrast) {
+                let p = [centre[0] + e.s * dir[0], centre[1] + e.s * dir[1]];
+                points_px.push(p);
+                undistorted.push(self.camera.undistort_px(p));
+                contrasts.push(f64::from(e.light - e.dark));
+                dirs.push((dir, e.s));
+            }
+        }
+        if rays_in_image < rays / 4 || undistorted.len() < self.cfg.min_rim_points as usize {
+            return None;
+        }
+        let tol = self.cfg.inlier_tolerance_px.max(0.1);
+        let coarse_tol = (0.05 * start.b).max(3.0 * tol);
+        let ellipse = conic_fit::refine(start, &undistorted, coarse_tol, 2)
+            .and_then(|e| conic_fit::refine(&e, &undistorted, tol, 2))?;
+        if !self.plausible(&ellipse, 1.0) {
+            return None;
+        }
+        let mut residuals = Vec::new();
+        conic_fit::residuals(&ellipse, &undistorted, &mut residuals);
+        let inliers: Vec<usize> = (0..residuals.len()).filter(|&i| residuals[i] <= tol).collect();
+        if inliers.len() < self.cfg.min_rim_points as usize {
+            return None;
+        }
+        let mut inlier_contrast: Vec<f64> = inliers.iter().map(|&i| contrasts[i]).collect();
+        let rim_contrast = median(&mut inlier_contrast);
+        if rim_contrast < self.cfg.min_contrast_gray {
+            return None;
+        }
+        let shape = inliers.len() as f64 / rays_in_image as f64;
+
+        // Canopy evidence: the outer rim band beyond the inlier edges.
+        let [lo_ratio, hi_ratio] = self.cfg.canopy_band_ratio;
+        let stride = (inliers.len() / 48).max(1);
+        let (mut looked, mut seen) = (0usize, 0usize);
+        for &i in inliers.iter().step_by(stride) {
+            let (dir, s) = dirs[i];
+            let (s0, s1) = (lo_ratio * s, hi_ratio * s);
+            let far = [centre[0] + s1 * dir[0], centre[1] + s1 * dir[1]];
+            if !inside(far) {
+                continue;
+            }
+            let step = (s / 30.0).clamp(0.5, 4.0);
+            rim::profile(image, centre, dir, s0, s1, step, &mut self.profile);
+            looked += 1;
+            let max_width = ((0.35 * s / step).ceil() as usize).max(2);
+            let min_dip = (0.15 * rim_contrast).max(0.5 * self.cfg.min_contrast_gray) as f32;
+            if rim::has_outer_band(&self.profile, min_dip, max_width) {
+                seen += 1;
+            }
+        }
+        let canopy = if looked > 0 { seen as f64 / looked as f64 } else { 0.0 };
+        if looked >= 8 && ellipse.a >= self.cfg.canopy_required_from_px && canopy < self.cfg.min_canopy_fraction {
+            return None;
+        }
+        let w = self.cfg.canopy_weight.clamp(0.0, 1.0);
+        let score = (shape * ((1.0 - w) + w * canopy)).clamp(0.0, 1.0);
+        let _ = tracked;
+        if score < self.cfg.min_score {
+            return None;
+        }
+        // Keep the points near the ellipse: the probe and hose outlines are
+        // the fit's outliers, and fewer of them is better.
+        let keep = (0.05 * ellipse.a).max(3.0 * tol);
+        let points_px = points_px
+            .into_iter()
+            .zip(&residuals)
+            .filter(|(_, r)| **r <= keep)
+            .map(|(p, _)| p)
+            .collect();
+        Some(Verified {
+            ellipse,
+            points_px,
+            score,
+        })
+    }
+}
+
+impl Verified {
+    fn into_candidate(self) -> RimCandidate {
+        RimCandidate {
+            rim_points_px: self.points_px,
+            score: self.score,
+            ellipse_px: self.ellipse,
+        }
+    }
+}
