@@ -128,7 +128,10 @@ impl Writer {
                     let _ = reply.send(self.summary.clone());
                     return self.summary;
                 }
-                Some(item) => self.handle(item),
+                Some(item) => {
+                    self.handle(item);
+                    self.rotate_if_due();
+                }
                 None => {}
             }
             if Instant::now() >= next_sync {
