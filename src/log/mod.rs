@@ -1,8 +1,348 @@
-//! MCAP flight log. PLACEHOLDER: built by the log work (issue 5).
+//! MCAP flight log (ARCHITECTURE.md section 7).
+//!
+//! The caller hands frames, measurements, MAVLink traffic and tracing events to a
+//! cheap, cloneable [`LogHandle`]; a dedicated writer thread behind a bounded
+//! queue encodes them (Foxglove protobuf schemas, JSON for our own records) and
+//! writes them with the plain `mcap` crate. The caller never waits for the disk:
+//! a full queue drops the item and counts it; a write error is reported and the
+//! writer retries with a new file later.
+//!
+//! Also here: start-up recovery and `recover` ([`recover`]), replay of
+//! `/camera/image` ([`replay`]) and the post-flight review ([`review`]).
 
+mod layer;
+pub mod recover;
+pub mod replay;
+
+pub mod storage;
+pub mod topics;
+mod writer;
+
+use crate::camera::CameraModel;
+use crate::frame::Frame;
+use crate::link::LinkEvent;
+use crate::measure::Measurement;
+use crate::measure::mount::Mount;
 use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::mpsc::{self, SyncSender, TrySendError};
+use std::sync::{Arc, Mutex};
+use std::thread::JoinHandle;
 
-/// `[log]` in the config.
+pub use layer::LogLayer;
+pub use storage::{FileStorage, Storage, StorageFile};
+pub use topics::MountTransforms;
+
+/// How `/camera/image` stores the frames. Both are lossless, so a replay
+/// reproduces the logged detections exactly.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum ImageEncoding {
+    /// `foxglove.RawImage`, mono8: cheapest on the CPU.
+    Raw,
+    /// `foxglove.CompressedImage`, PNG (fast): less disk, more CPU.
+    Png,
+}
+
+/// `[log]` in the config (every key documented in `config/default.toml`).
 #[derive(Clone, Debug, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
-pub struct LogConfig {}
+pub struct LogConfig {
+    /// Log folder (the `run --log-dir` default).
+    pub dir: PathBuf,
+    /// File name prefix: `<prefix>_<UTC start>_<part>.mcap`.
+    pub file_prefix: String,
+    pub image_encoding: ImageEncoding,
+    /// Start a new numbered file after this many MiB (0: never by size).
+    pub rotate_size_mib: u64,
+    /// Start a new numbered file after this many seconds (0: never by time).
+    pub rotate_duration_s: u64,
+    /// Items (frames, measurements, messages, events) the queue holds before
+    /// dropping new ones.
+    pub queue_len: usize,
+    /// Close the chunk and `sync_data` at least this often, milliseconds (1..=1000).
+    pub sync_interval_ms: u64,
+    /// Target chunk size, KiB (a chunk also ends at every sync).
+    pub chunk_size_kib: u64,
+    /// After a write error, wait this long before opening a new file, seconds.
+    pub retry_after_error_s: u64,
+    /// Recover cut-short files found in the log folder at start-up.
+    pub recover_on_start: bool,
+    /// Keep a recovered file's cut-short original as `<name>.mcap.cut`.
+    pub keep_cut_files: bool,
+}
+
+impl LogConfig {
+    /// Checks the values a writer relies on.
+    pub fn validate(&self) -> Result<(), LogError> {
+        let bad = |m: String| Err(LogError::Config(m));
+        if self.queue_len == 0 {
+            return bad("log.queue_len must be at least 1".into());
+        }
+        if !(1..=1000).contains(&self.sync_interval_ms) {
+            return bad(format!(
+                "log.sync_interval_ms must be 1..=1000 (a crash may lose at most about a second), got {}",
+                self.sync_interval_ms
+            ));
+        }
+        if self.chunk_size_kib == 0 {
+            return bad("log.chunk_size_kib must be at least 1".into());
+        }
+        if self.file_prefix.is_empty()
+            || self
+                .file_prefix
+                .chars()
+                .any(|c| !(c.is_ascii_alphanumeric() || c == '-' || c == '_'))
+        {
+            return bad(format!(
+                "log.file_prefix must be non-empty ASCII letters, digits, '-' or '_', got {:?}",
+                self.file_prefix
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// Why the log could not be started, finished, recovered or read.
+#[derive(Debug, thiserror::Error)]
+pub enum LogError {
+    #[error("log config: {0}")]
+    Config(String),
+    #[error("{path}: {message}")]
+    Io { path: PathBuf, message: String },
+    #[error("{path}: not a readable MCAP log: {message}")]
+    Format { path: PathBuf, message: String },
+    #[error("log writer: {0}")]
+    Writer(String),
+}
+
+impl LogError {
+    pub(crate) fn io(path: &Path, e: impl std::fmt::Display) -> Self {
+        LogError::Io {
+            path: path.to_path_buf(),
+            message: e.to_string(),
+        }
+    }
+    pub(crate) fn format(path: &Path, e: impl std::fmt::Display) -> Self {
+        LogError::Format {
+            path: path.to_path_buf(),
+            message: e.to_string(),
+        }
+    }
+}
+
+/// What a finished log wrote.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct LogSummary {
+    /// Files written by this run, in order (several when rotated).
+    pub files: Vec<PathBuf>,
+    /// Cut-short files of an earlier run recovered at start-up.
+    pub recovered: Vec<PathBuf>,
+    /// Messages written, all topics.
+    pub messages: u64,
+    /// Frames written to `/camera/image`.
+    pub frames: u64,
+    /// Items dropped because the queue was full (the writer fell behind).
+    pub dropped_queue_full: u64,
+    /// Items lost because no file could be written (write errors, disk full).
+    pub dropped_write_error: u64,
+    /// Write, sync or open errors reported.
+    pub write_errors: u64,
+}
+
+/// One tracing event for `/log`.
+#[derive(Clone, Debug)]
+pub(crate) struct LogEvent {
+    pub time_ns: u64,
+    pub level: foxglove::messages::log::Level,
+    pub message: String,
+    pub name: String,
+    pub file: String,
+    pub line: u32,
+}
+
+/// A measured frame with what its topics need besides the measurement.
+pub(crate) struct MeasurementItem {
+    pub measurement: Arc<Measurement>,
+    pub detection_json: serde_json::Value,
+    pub mount: MountTransforms,
+}
+
+/// What the queue carries to the writer thread.
+pub(crate) enum Item {
+    Frame(Arc<Frame>),
+    Measurement(Box<MeasurementItem>),
+    Link(Box<LinkEvent>),
+    Log(Box<LogEvent>),
+    /// Flush, write the summary, close, and reply.
+    Finish(mpsc::Sender<LogSummary>),
+}
+
+/// Counters shared by the handles and the writer thread.
+#[derive(Debug, Default)]
+pub(crate) struct Counters {
+    pub dropped_queue_full: AtomicU64,
+}
+
+struct Shared {
+    tx: SyncSender<Item>,
+    counters: Arc<Counters>,
+    thread: Mutex<Option<JoinHandle<LogSummary>>>,
+}
+
+/// The caller's side of the log: cheap to clone, never blocks.
+#[derive(Clone)]
+pub struct LogHandle {
+    shared: Arc<Shared>,
+}
+
+/// Starts flight logs.
+pub struct FlightLog;
+
+impl FlightLog {
+    /// Opens a new file (named by start time) in `dir` and starts the writer
+    /// thread. Recovers leftovers of an interrupted run found in `dir` first.
+    pub fn start(cfg: &LogConfig, dir: &Path, camera: &CameraModel) -> Result<LogHandle, LogError> {
+        cfg.validate()?;
+        std::fs::create_dir_all(dir).map_err(|e| LogError::io(dir, e))?;
+        Self::start_with_storage(cfg, dir, camera, Box::new(FileStorage))
+    }
+
+    /// [`FlightLog::start`] writing through `storage` (tests inject failing
+    /// storage here: disk full, I/O errors).
+    pub fn start_with_storage(
+        cfg: &LogConfig,
+        dir: &Path,
+        camera: &CameraModel,
+        storage: Box<dyn Storage>,
+    ) -> Result<LogHandle, LogError> {
+        cfg.validate()?;
+        let recovered = if cfg.recover_on_start {
+            recover::recover_dir(dir, cfg.keep_cut_files)?
+        } else {
+            Vec::new()
+        };
+        let base = storage::run_base_name(dir, &cfg.file_prefix, storage::now_ns());
+        let counters = Arc::new(Counters::default());
+        let (tx, rx) = mpsc::sync_channel(cfg.queue_len);
+        let mut w = writer::Writer::new(
+            cfg.clone(),
+            dir.to_path_buf(),
+            base,
+            camera.clone(),
+            storage,
+            counters.clone(),
+            recovered,
+        );
+        // Open the first file now so a bad folder shows at start-up, not later.
+        w.open_first()?;
+        let thread = std::thread::Builder::new()
+            .name("mcap-log".into())
+            .spawn(move || w.run(rx))
+            .map_err(|e| LogError::Writer(format!("cannot start the writer thread: {e}")))?;
+        Ok(LogHandle {
+            shared: Arc::new(Shared {
+                tx,
+                counters,
+                thread: Mutex::new(Some(thread)),
+            }),
+        })
+    }
+}
+
+impl LogHandle {
+    /// Queues without waiting; a full queue drops the item and counts it.
+    fn push(&self, item: Item) {
+        match self.shared.tx.try_send(item) {
+            Ok(()) => {}
+            Err(TrySendError::Full(_)) | Err(TrySendError::Disconnected(_)) => {
+                self.shared
+                    .counters
+                    .dropped_queue_full
+                    .fetch_add(1, Ordering::Relaxed);
+            }
+        }
+    }
+
+    /// Items dropped so far because the queue was full.
+    pub fn dropped(&self) -> u64 {
+        self.shared
+            .counters
+            .dropped_queue_full
+            .load(Ordering::Relaxed)
+    }
+
+    /// `/camera/image`, `/camera/calibration`, and `/sim/truth` when
+    /// `frame.truth()` is Some.
+    pub fn frame(&self, frame: Arc<Frame>) {
+        self.push(Item::Frame(frame));
+    }
+
+    /// `/drogue/annotations`, `/drogue/detection` (the given JSON: the
+    /// DetectionRecord plus the caller's timings/latency stamps),
+    /// `/drogue/pose` (when detected), `/tf`.
+    pub fn measurement(
+        &self,
+        m: Arc<Measurement>,
+        detection_json: serde_json::Value,
+        mount: &Mount,
+    ) {
+        self.measurement_with_transforms(m, detection_json, MountTransforms::from_mount(mount));
+    }
+
+    /// [`LogHandle::measurement`] with the mount given as plain transforms.
+    pub fn measurement_with_transforms(
+        &self,
+        m: Arc<Measurement>,
+        detection_json: serde_json::Value,
+        mount: MountTransforms,
+    ) {
+        self.push(Item::Measurement(Box::new(MeasurementItem {
+            measurement: m,
+            detection_json,
+            mount,
+        })));
+    }
+
+    /// `/mavlink/out` (outgoing) or `/mavlink/in`.
+    pub fn mavlink(&self, event: LinkEvent) {
+        self.push(Item::Link(Box::new(event)));
+    }
+
+    /// A tracing Layer that writes events to `/log` (foxglove.Log).
+    pub fn tracing_layer(&self) -> LogLayer {
+        LogLayer::new(self.clone())
+    }
+
+    pub(crate) fn log_event(&self, event: LogEvent) {
+        self.push(Item::Log(Box::new(event)));
+    }
+
+    /// Flushes, writes the summary/index, closes; returns paths written and
+    /// counts. Waits for the queue to drain. Other clones of the handle stay
+    /// usable but their items are dropped (and counted) from here on.
+    pub fn finish(self) -> Result<LogSummary, LogError> {
+        let (reply_tx, reply_rx) = mpsc::channel();
+        let sent = self.shared.tx.send(Item::Finish(reply_tx)).is_ok();
+        let reply = if sent { reply_rx.recv().ok() } else { None };
+        let thread = self
+            .shared
+            .thread
+            .lock()
+            .map_err(|_| LogError::Writer("writer state poisoned".into()))?
+            .take();
+        let joined = match thread {
+            Some(t) => Some(
+                t.join()
+                    .map_err(|_| LogError::Writer("the writer thread panicked".into()))?,
+            ),
+            None => None,
+        };
+        let mut summary = reply
+            .or(joined)
+            .ok_or_else(|| LogError::Writer("the log was already finished".into()))?;
+        summary.dropped_queue_full = self.dropped();
+        Ok(summary)
+    }
+}

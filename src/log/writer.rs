@@ -1,0 +1,454 @@
+//! The writer thread: drains the queue into MCAP files, closes a chunk and
+//! syncs at least every `sync_interval_ms`, rotates by size and duration, and
+//! survives write errors (reported, counted, retried with a new file).
+
+use super::storage::{self, Storage, StorageFile};
+use super::topics::{self, ChannelSpec};
+use super::{Counters, Item, LogConfig, LogError, LogEvent, LogSummary, MeasurementItem};
+use crate::camera::CameraModel;
+use crate::frame::Frame;
+use crate::link::LinkEvent;
+use foxglove::messages::log::Level;
+use mcap::records::MessageHeader;
+use std::collections::HashMap;
+use std::io::Write;
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::sync::mpsc::{Receiver, RecvTimeoutError};
+use std::time::{Duration, Instant};
+
+/// Record overhead per message (opcode, length, header, index entry): for
+/// the size estimate that drives rotation.
+const MESSAGE_OVERHEAD_BYTES: u64 = 40;
+
+thread_local! {
+    /// Set on the writer thread: its own tracing events must not come back
+    /// through the queue (it writes them to `/log` itself).
+    pub(crate) static ON_WRITER_THREAD: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
+}
+
+/// One open MCAP file.
+struct OpenFile {
+    path: PathBuf,
+    mcap: mcap::Writer<Box<dyn storage::WriteSeek>>,
+    sync: Box<dyn FnMut() -> std::io::Result<()> + Send>,
+    channels: HashMap<&'static str, u16>,
+    opened: Instant,
+    bytes: u64,
+    /// Written since the last sync.
+    dirty: bool,
+}
+
+pub(crate) struct Writer {
+    cfg: LogConfig,
+    dir: PathBuf,
+    base: String,
+    camera: CameraModel,
+    storage: Box<dyn Storage>,
+    counters: Arc<Counters>,
+    file: Option<OpenFile>,
+    next_part: u32,
+    /// After an error: no new file before this.
+    retry_at: Option<Instant>,
+    summary: LogSummary,
+    buf: Vec<u8>,
+}
+
+impl Writer {
+    pub(crate) fn new(
+        cfg: LogConfig,
+        dir: PathBuf,
+        base: String,
+        camera: CameraModel,
+        storage: Box<dyn Storage>,
+        counters: Arc<Counters>,
+        recovered: Vec<PathBuf>,
+    ) -> Self {
+        Self {
+            cfg,
+            dir,
+            base,
+            camera,
+            storage,
+            counters,
+            file: None,
+            next_part: 0,
+            retry_at: None,
+            summary: LogSummary {
+                recovered,
+                ..Default::default()
+            },
+            buf: Vec::with_capacity(2 << 20),
+        }
+    }
+
+    /// Opens part 000; its failure stops the start-up (a bad log folder).
+    pub(crate) fn open_first(&mut self) -> Result<(), LogError> {
+        let path = storage::part_path(&self.dir, &self.base, self.next_part);
+        let file = self.open(&path).map_err(|e| LogError::io(&path, e))?;
+        self.file = Some(file);
+        Ok(())
+    }
+
+    fn open(&mut self, path: &std::path::Path) -> Result<OpenFile, String> {
+        let StorageFile { writer, sync } = self.storage.create(path).map_err(|e| e.to_string())?;
+        self.next_part += 1;
+        let options = mcap::WriteOptions::new()
+            .compression(None)
+            .profile("")
+            .library(concat!("drogue-vision ", env!("CARGO_PKG_VERSION")))
+            .chunk_size(Some(self.cfg.chunk_size_kib.saturating_mul(1024)));
+        let mcap = mcap::Writer::with_options(writer, options).map_err(|e| e.to_string())?;
+        self.summary.files.push(path.to_path_buf());
+        Ok(OpenFile {
+            path: path.to_path_buf(),
+            mcap,
+            sync,
+            channels: HashMap::new(),
+            opened: Instant::now(),
+            bytes: 0,
+            dirty: true,
+        })
+    }
+
+    pub(crate) fn run(mut self, rx: Receiver<Item>) -> LogSummary {
+        ON_WRITER_THREAD.with(|f| f.set(true));
+        let interval = Duration::from_millis(self.cfg.sync_interval_ms);
+        let mut next_sync = Instant::now() + interval;
+        loop {
+            let timeout = next_sync.saturating_duration_since(Instant::now());
+            let item = match rx.recv_timeout(timeout) {
+                Ok(item) => Some(item),
+                Err(RecvTimeoutError::Timeout) => None,
+                Err(RecvTimeoutError::Disconnected) => break,
+            };
+            match item {
+                Some(Item::Finish(reply)) => {
+                    self.close();
+                    let _ = reply.send(self.summary.clone());
+                    return self.summary;
+                }
+                Some(item) => {
+                    self.handle(item);
+                    self.rotate_if_due();
+                }
+                None => {}
+            }
+            if Instant::now() >= next_sync {
+                self.sync();
+                self.rotate_if_due();
+                next_sync = Instant::now() + interval;
+            }
+        }
+        // Every handle is gone without finish(): still close the file cleanly.
+        self.close();
+        self.summary
+    }
+
+    fn handle(&mut self, item: Item) {
+        match item {
+            Item::Frame(frame) => self.frame(&frame),
+            Item::Measurement(m) => self.measurement(&m),
+            Item::Link(e) => self.link(&e),
+            Item::Log(e) => self.write_log_event(&e),
+            Item::Finish(_) => {}
+        }
+    }
+
+    fn frame(&mut self, frame: &Frame) {
+        let t = frame.capture_time_ns;
+        let seq = frame.seq;
+        let mut buf = std::mem::take(&mut self.buf);
+        match topics::image(frame, self.cfg.image_encoding, &mut buf) {
+            Ok(()) => {
+                if self.write(topics::IMAGE, seq, t, t, &buf) {
+                    self.summary.frames += 1;
+                }
+            }
+            Err(e) => self.report(Level::Error, format!("frame {seq}: {e}")),
+        }
+        let cal = topics::calibration(&self.camera, t);
+        self.write_proto(topics::CALIBRATION, seq, t, &cal, &mut buf);
+        if let Some(truth) = frame.truth() {
+            self.write_json(topics::SIM_TRUTH, seq, t, t, truth, &mut buf);
+        }
+        self.buf = buf;
+    }
+
+    fn measurement(&mut self, item: &MeasurementItem) {
+        let m = &item.measurement;
+        let (seq, t) = (m.seq, m.capture_time_ns);
+        let mut buf = std::mem::take(&mut self.buf);
+        let ann = topics::annotations(m, &self.camera);
+        self.write_proto(topics::ANNOTATIONS, seq, t, &ann, &mut buf);
+        self.write_json(topics::DETECTION, seq, t, t, &item.detection_json, &mut buf);
+        if let Some(d) = &m.detection {
+            self.write_proto(topics::POSE, seq, t, &topics::pose(d, t), &mut buf);
+        }
+        let tf = topics::transforms(m, &item.mount);
+        self.write_proto(topics::TF, seq, t, &tf, &mut buf);
+        self.buf = buf;
+    }
+
+    fn link(&mut self, e: &LinkEvent) {
+        let topic = if e.outgoing {
+            topics::MAVLINK_OUT
+        } else {
+            topics::MAVLINK_IN
+        };
+        // Derived from a frame: stamped with its capture time (Foxglove lines
+        // it up with the image); the send time is the publish time.
+        let log_time = e.capture_time_ns.unwrap_or(e.time_ns);
+        let mut buf = std::mem::take(&mut self.buf);
+        self.write_json(topic, 0, log_time, e.time_ns, e, &mut buf);
+        self.buf = buf;
+    }
+
+    fn write_log_event(&mut self, e: &LogEvent) {
+        let mut buf = std::mem::take(&mut self.buf);
+        let msg = topics::log_message(e);
+        self.write_proto(topics::LOG, 0, e.time_ns, &msg, &mut buf);
+        self.buf = buf;
+    }
+
+    fn write_proto<T: foxglove::Encode>(
+        &mut self,
+        topic: &'static str,
+        seq: u64,
+        time_ns: u64,
+        msg: &T,
+        buf: &mut Vec<u8>,
+    ) {
+        match topics::encode(msg, buf) {
+            Ok(()) => {
+                self.write(topic, seq, time_ns, time_ns, buf);
+            }
+            Err(e) => self.report(Level::Error, format!("{topic}: encoding: {e}")),
+        }
+    }
+
+    fn write_json<T: serde::Serialize>(
+        &mut self,
+        topic: &'static str,
+        seq: u64,
+        log_time: u64,
+        publish_time: u64,
+        value: &T,
+        buf: &mut Vec<u8>,
+    ) {
+        buf.clear();
+        match serde_json::to_writer(&mut *buf, value) {
+            Ok(()) => {
+                self.write(topic, seq, log_time, publish_time, buf);
+            }
+            Err(e) => self.report(Level::Error, format!("{topic}: JSON: {e}")),
+        }
+    }
+
+    /// Writes one message; on failure reports, abandons the file and drops.
+    fn write(
+        &mut self,
+        topic: &'static str,
+        seq: u64,
+        log_time: u64,
+        publish_time: u64,
+        data: &[u8],
+    ) -> bool {
+        if !self.ensure_file() {
+            self.summary.dropped_write_error += 1;
+            return false;
+        }
+        let image = self.cfg.image_encoding;
+        let Some(file) = self.file.as_mut() else {
+            return false;
+        };
+        let result = (|| -> Result<(), String> {
+            let channel_id = match file.channels.get(topic) {
+                Some(&id) => id,
+                None => {
+                    let ChannelSpec {
+                        schema,
+                        message_encoding,
+                    } = topics::channel_spec(topic, image)?;
+                    let schema_id = file
+                        .mcap
+                        .add_schema(&schema.name, &schema.encoding, &schema.data)
+                        .map_err(|e| e.to_string())?;
+                    let id = file
+                        .mcap
+                        .add_channel(schema_id, topic, message_encoding, &Default::default())
+                        .map_err(|e| e.to_string())?;
+                    file.channels.insert(topic, id);
+                    id
+                }
+            };
+            let header = MessageHeader {
+                channel_id,
+                // Frame-derived topics carry the frame's sequence number
+                // (replay restores Frame::seq from it).
+                sequence: u32::try_from(seq).unwrap_or(u32::MAX),
+                log_time,
+                publish_time,
+            };
+            file.mcap
+                .write_to_known_channel(&header, data)
+                .map_err(|e| e.to_string())
+        })();
+        match result {
+            Ok(()) => {
+                file.bytes += data.len() as u64 + MESSAGE_OVERHEAD_BYTES;
+                file.dirty = true;
+                self.summary.messages += 1;
+                true
+            }
+            Err(e) => {
+                let path = file.path.display().to_string();
+                self.fail(format!("writing {topic} to {path}: {e}"));
+                self.summary.dropped_write_error += 1;
+                false
+            }
+        }
+    }
+
+    /// A file to write to: the open one, or a new part once the retry time
+    /// after an error has passed.
+    fn ensure_file(&mut self) -> bool {
+        if self.file.is_some() {
+            return true;
+        }
+        if self.retry_at.is_some_and(|t| Instant::now() < t) {
+            return false;
+        }
+        let path = storage::part_path(&self.dir, &self.base, self.next_part);
+        match self.open(&path) {
+            Ok(f) => {
+                self.file = Some(f);
+                self.retry_at = None;
+                true
+            }
+            Err(e) => {
+                // The part number is not used up by a failed open.
+                self.fail(format!("opening {}: {e}", path.display()));
+                false
+            }
+        }
+    }
+
+    /// A write, sync or open error: report it, abandon the file (what reached
+    /// the disk stays readable and recoverable), retry later.
+    fn fail(&mut self, message: String) {
+        self.summary.write_errors += 1;
+        if let Some(file) = self.file.take() {
+            // Dropping the mcap writer tries to finish the file; after an I/O
+            // error that fails quietly, which is fine: the file is recovered
+            // at the next start-up.
+            drop(file);
+        }
+        self.retry_at = Some(Instant::now() + Duration::from_secs(self.cfg.retry_after_error_s));
+        self.report(
+            Level::Error,
+            format!(
+                "{message}; logging paused, retrying with a new file in {} s",
+                self.cfg.retry_after_error_s
+            ),
+        );
+    }
+
+    /// Reports on the terminal (tracing) and, if a file is open, in `/log`.
+    fn report(&mut self, level: Level, message: String) {
+        match level {
+            Level::Error | Level::Fatal => {
+                tracing::error!(target: "drogue_vision::log", "{message}")
+            }
+            Level::Warning => tracing::warn!(target: "drogue_vision::log", "{message}"),
+            _ => tracing::info!(target: "drogue_vision::log", "{message}"),
+        }
+        if self.file.is_some() {
+            let event = LogEvent {
+                time_ns: storage::now_ns(),
+                level,
+                message,
+                name: "drogue_vision::log".into(),
+                file: file!().into(),
+                line: line!(),
+            };
+            self.write_log_event(&event);
+        }
+    }
+
+    /// Closes the chunk and makes the file durable.
+    fn sync(&mut self) {
+        let Some(file) = self.file.as_mut() else {
+            return;
+        };
+        if !file.dirty {
+            return;
+        }
+        let result = file
+            .mcap
+            .flush()
+            .map_err(|e| e.to_string())
+            .and_then(|()| (file.sync)().map_err(|e| e.to_string()));
+        match result {
+            Ok(()) => file.dirty = false,
+            Err(e) => {
+                let path = file.path.display().to_string();
+                self.fail(format!("syncing {path}: {e}"));
+            }
+        }
+    }
+
+    fn rotate_if_due(&mut self) {
+        let Some(file) = self.file.as_ref() else {
+            return;
+        };
+        let by_size = self.cfg.rotate_size_mib > 0
+            && file.bytes >= self.cfg.rotate_size_mib.saturating_mul(1 << 20);
+        let by_time = self.cfg.rotate_duration_s > 0
+            && file.opened.elapsed() >= Duration::from_secs(self.cfg.rotate_duration_s);
+        if by_size || by_time {
+            self.close();
+            // The next item opens the next part.
+        }
+    }
+
+    /// Writes the summary and index, syncs, closes.
+    fn close(&mut self) {
+        let Some(mut file) = self.file.take() else {
+            return;
+        };
+        let dropped = self
+            .counters
+            .dropped_queue_full
+            .load(std::sync::atomic::Ordering::Relaxed);
+        if dropped > 0 || self.summary.dropped_write_error > 0 {
+            self.file = Some(file);
+            self.report(
+                Level::Warning,
+                format!(
+                    "log items dropped so far: {dropped} (queue full), {} (write errors)",
+                    self.summary.dropped_write_error
+                ),
+            );
+            let Some(f) = self.file.take() else {
+                return;
+            };
+            file = f;
+        }
+        let OpenFile {
+            path,
+            mut mcap,
+            mut sync,
+            ..
+        } = file;
+        let result = mcap.finish().map(|_| ()).map_err(|e| e.to_string());
+        // finish() leaves the footer in the write buffer: flush, then sync.
+        let mut inner = mcap.into_inner();
+        let result = result
+            .and_then(|()| inner.flush().map_err(|e| e.to_string()))
+            .and_then(|()| sync().map_err(|e| e.to_string()));
+        if let Err(e) = result {
+            self.fail(format!("closing {}: {e}", path.display()));
+        }
+    }
+}
