@@ -1,25 +1,30 @@
-//! Our default fit: Algorithm 1 made scale-aware and unbiased.
+//! Our default fit: Algorithm 1 made scale-aware, consensus-checked and
+//! unbiased.
 //!
-//! 1. Random minimal subsets and their A+C=1 ellipses, as in Algorithm 1.
+//! 1. Random minimal subsets and their A+C=1 ellipses, as in Algorithm 1;
+//!    implausible ones (far bigger than the data: conics through nearly
+//!    collinear points of a probe edge) are dropped.
 //! 2. Clustering with centroid linkage (eqs. 9-10) in a parameter space that
 //!    is all pixels and has no singularity: (xc, yc, (a+b)/2, and the vector
 //!    (a-b)/2 * (cos 2theta, sin 2theta)). The last pair is how far the
 //!    outline departs from a circle and in which direction: it goes to zero
 //!    for a near-circle (where theta means nothing) and is continuous across
-//!    theta = +-90 deg. The stop threshold is relative to the ellipse's size
+//!    theta = +-90 deg. The stop threshold is relative to the data's size
 //!    plus a pixel floor, so one setting serves 10 px and 400 px ellipses.
-//! 3. The few biggest classes are scored by consensus (points within a band
-//!    around their centre's ellipse) and the best one is the model: a class
-//!    of consistent fits to a structured outlier run (the probe's or hose's
-//!    outline) cannot win by size alone.
-//! 4. Rounds of: inliers within the band; Taubin fit; orthogonal-distance
-//!    refinement; the band shrinks to k robust sigmas of the inliers'
-//!    residuals (never below a pixel floor). Ends when the inlier set is
-//!    stable.
+//! 3. Class centres are ranked by support (points within a wide band); the
+//!    best few are optimised locally (select the band, Taubin refit, shrink
+//!    the band towards k robust sigmas) and the one explaining the most
+//!    points within a common tight band wins. With sub-pixel noise the
+//!    5-point fits to a partial arc scatter widely, so the true class need
+//!    not be the biggest, and a class of consistent fits to a structured
+//!    outlier run must not win by size alone.
+//! 4. The winner on all points: rounds of inlier selection and
+//!    orthogonal-distance (geometric) refinement, the band at k robust
+//!    sigmas (never below a pixel floor), until the inlier set is stable.
 
 use super::algorithm1::subset_ellipses;
 use super::cluster::agglomerate;
-use super::{FitConfig, FitError, Points, geometric, mean_radius, taubin};
+use super::{FitConfig, FitError, Points, geometric, taubin};
 use crate::measure::ellipse::Ellipse;
 
 /// The scale-free parameter vector of an ellipse (all entries in the
@@ -47,15 +52,16 @@ fn select(pts: &[[f64; 2]], e: &Ellipse, band: f64, out: &mut [bool]) -> usize {
     count
 }
 
-/// Robust sigma (1.4826 * median absolute residual) of the selected points.
+/// Robust sigma (1.4826 * median absolute first-order residual) of the
+/// selected points.
 fn robust_sigma(pts: &[[f64; 2]], e: &Ellipse, keep: &[bool], scratch: &mut Vec<f64>) -> f64 {
-    let g = geometric::Geometry::new(e);
+    let conic = e.to_conic();
     scratch.clear();
     scratch.extend(
         pts.iter()
             .zip(keep)
             .filter(|(_, k)| **k)
-            .map(|(p, _)| g.distance(*p).abs()),
+            .map(|(p, _)| conic.sampson_distance(p[0], p[1])),
     );
     if scratch.is_empty() {
         return f64::INFINITY;
@@ -65,6 +71,83 @@ fn robust_sigma(pts: &[[f64; 2]], e: &Ellipse, keep: &[bool], scratch: &mut Vec<
     1.4826 * *median
 }
 
+/// Whether a subset's ellipse could be the rim of this data (normalised
+/// coordinates: the points have unit RMS radius about the origin). Rejects
+/// the huge, flat conics through nearly collinear points (a probe edge).
+fn plausible(e: &Ellipse) -> bool {
+    e.a < MAX_AXIS_DATA && e.cx.hypot(e.cy) < MAX_AXIS_DATA
+}
+
+/// Largest plausible semi-axis (and centre offset), in units of the data's
+/// RMS radius. A 60 % arc of a 2:1 ellipse has an RMS radius of about a/2.
+const MAX_AXIS_DATA: f64 = 5.0;
+
+/// Points within `band` of `e` (first-order distance).
+fn support(pts: &[[f64; 2]], e: &Ellipse, band: f64) -> usize {
+    let conic = e.to_conic();
+    pts.iter()
+        .filter(|p| conic.sampson_distance(p[0], p[1]) < band)
+        .count()
+}
+
+/// The state of one candidate model during its local optimisation.
+struct Candidate {
+    model: Ellipse,
+    band: f64,
+    sigma: f64,
+}
+
+/// Local optimisation of a candidate model: alternately select the points
+/// within the band and refit them with Taubin's fit; the band shrinks to
+/// k robust sigmas, at most halving per round (so that a rough start is not
+/// locked onto a subset of the rim) and at least 30 %, never below the floor.
+fn local_optimise(
+    xy: &[[f64; 2]],
+    start: &Ellipse,
+    band: f64,
+    cfg: &FitConfig,
+    min_band: f64,
+    keep: &mut [bool],
+    scratch: &mut Vec<f64>,
+) -> Option<Candidate> {
+    let mut c = Candidate {
+        model: *start,
+        band,
+        sigma: f64::INFINITY,
+    };
+    for _ in 0..cfg.adaptive_refine_rounds {
+        if select(xy, &c.model, c.band, keep) < 5 {
+            break;
+        }
+        if let Some(e) = taubin::fit_ellipse(xy, Some(keep)).filter(plausible) {
+            c.model = e;
+        }
+        c.sigma = robust_sigma(xy, &c.model, keep, scratch);
+        // Shrink to k sigmas, but by at least 30 % a round: a rough model
+        // has a large sigma and would otherwise never tighten.
+        let next = (cfg.adaptive_inlier_sigmas * c.sigma)
+            .min(0.7 * c.band)
+            .max(min_band);
+        let converged = next >= c.band * 0.99;
+        c.band = next;
+        if converged {
+            break;
+        }
+    }
+    c.sigma.is_finite().then_some(c)
+}
+
+/// Points used to score class centres and to optimise candidates locally
+/// (every k-th point); the final refit uses all points.
+const MAX_SCORE_POINTS: usize = 150;
+const MAX_LO_POINTS: usize = 250;
+
+/// Every k-th point, so that at most `max` remain.
+fn subsample(xy: &[[f64; 2]], max: usize) -> Vec<[f64; 2]> {
+    let stride = xy.len().div_ceil(max).max(1);
+    xy.iter().step_by(stride).copied().collect()
+}
+
 pub(crate) fn fit(
     pts: &Points,
     cfg: &FitConfig,
@@ -72,61 +155,107 @@ pub(crate) fn fit(
 ) -> Result<(Ellipse, Vec<bool>), FitError> {
     let xy = &pts.xy;
     let px = pts.scale;
-    // 1-2. Subset ellipses and their scale-aware clustering.
+    // 1-2. Subset ellipses and their scale-aware clustering. In normalised
+    // coordinates the data's RMS radius is 1, so the tolerance
+    // `relative * radius + px` is a constant.
     let set: Vec<[f64; 5]> =
         subset_ellipses(pts, cfg.adaptive_subsets, cfg.adaptive_subset_size, seed)
             .iter()
+            .filter(|e| plausible(e))
             .map(to_vector)
             .collect();
-    let (rel, floor) = (cfg.adaptive_cluster_relative, cfg.adaptive_cluster_px / px);
+    let tolerance = cfg.adaptive_cluster_relative + cfg.adaptive_cluster_px / px;
     let distance = |v: &[f64; 5], w: &[f64; 5]| {
-        let d = v
-            .iter()
+        v.iter()
             .zip(w)
             .map(|(x, y)| (x - y) * (x - y))
             .sum::<f64>()
-            .sqrt();
-        d / (rel * 0.5 * (v[2] + w[2]).abs() + floor)
+            .sqrt()
     };
-    let clusters = agglomerate(&set, distance, 1.0);
+    let clusters = agglomerate(&set, distance, tolerance);
 
-    // 3. Consensus among the biggest classes.
-    let band_of = |e: &Ellipse| {
-        cfg.adaptive_initial_band_relative * mean_radius(e) + cfg.adaptive_inlier_min_px / px
-    };
+    // 3. Every class centre (an average of consistent subset fits, eq. 10)
+    // is scored by its support within a wide band on a subsample; the best
+    // few are optimised locally, and the one that then explains the most
+    // points within a common tight band wins. Support, not class size,
+    // decides: with sub-pixel noise, 5-point fits to a partial arc scatter
+    // by more than any useful tolerance, so the true class can be small.
+    let min_band = cfg.adaptive_inlier_min_px / px;
+    let initial_band = cfg.adaptive_initial_band_relative + min_band;
+    let score_pts = subsample(xy, MAX_SCORE_POINTS);
+    let mut scored: Vec<(usize, usize, Ellipse)> = clusters
+        .iter()
+        .enumerate()
+        .filter_map(|(i, c)| from_vector(&c.centre).map(|e| (i, e)))
+        .map(|(i, e)| (support(&score_pts, &e, initial_band), i, e))
+        .collect();
+    // Most support first; ties: the bigger class (lower index).
+    scored.sort_by(|x, y| y.0.cmp(&x.0).then(x.1.cmp(&y.1)));
+    let lo_pts = subsample(xy, MAX_LO_POINTS);
     let mut keep = vec![false; xy.len()];
-    let mut best: Option<(usize, Ellipse)> = None;
-    for c in clusters.iter().take(cfg.adaptive_clusters_scored) {
-        let Some(e) = from_vector(&c.centre) else {
-            continue;
-        };
-        let support = select(xy, &e, band_of(&e), &mut keep);
-        if best.is_none_or(|(s, _)| support > s) {
-            best = Some((support, e));
+    let mut scratch = Vec::with_capacity(xy.len());
+    let candidates: Vec<Candidate> = scored
+        .iter()
+        .take(cfg.adaptive_clusters_scored)
+        .filter_map(|(_, _, e)| {
+            local_optimise(
+                &lo_pts,
+                e,
+                initial_band,
+                cfg,
+                min_band,
+                &mut keep[..lo_pts.len()],
+                &mut scratch,
+            )
+        })
+        .collect();
+    let best_sigma = candidates
+        .iter()
+        .map(|c| c.sigma)
+        .fold(f64::INFINITY, f64::min);
+    let score_band = (cfg.adaptive_inlier_sigmas * best_sigma).max(min_band);
+    let mut best: Option<(usize, &Candidate)> = None;
+    for c in &candidates {
+        let s = support(&lo_pts, &c.model, score_band);
+        if best.is_none_or(|(b, _)| s > b) {
+            best = Some((s, c));
         }
     }
-    let (_, mut model) = best.ok_or(FitError::NoEllipse)?;
+    let (_, winner) = best.ok_or(FitError::NoEllipse)?;
 
-    // 4. Select, refit without bias, shrink the band; until stable.
-    let initial_band = band_of(&model);
-    let min_band = cfg.adaptive_inlier_min_px / px;
-    let mut band = initial_band;
+    // 4. The winner on all points: finish the local optimisation, then
+    // select, refit geometrically, re-estimate the band; until stable.
+    let c = local_optimise(
+        xy,
+        &winner.model,
+        winner.band,
+        cfg,
+        min_band,
+        &mut keep,
+        &mut scratch,
+    )
+    .ok_or(FitError::NoEllipse)?;
+    let (mut model, mut band) = (c.model, c.band);
     let mut count = select(xy, &model, band, &mut keep);
-    let mut used: Option<Vec<bool>> = None;
+    // Until a geometric refit succeeds, the result is the Taubin model and
+    // the points it was fitted to.
+    let mut used = (count >= 5).then(|| keep.clone());
     let mut next = vec![false; xy.len()];
     let mut selected: Vec<[f64; 2]> = Vec::with_capacity(xy.len());
-    let mut scratch = Vec::with_capacity(xy.len());
-    for _ in 0..cfg.adaptive_refine_rounds {
+    for _ in 0..3 {
         if count < 5 {
             break;
         }
-        let start = taubin::fit_ellipse(xy, Some(&keep)).unwrap_or(model);
         selected.clear();
         selected.extend(xy.iter().zip(&keep).filter(|(_, k)| **k).map(|(p, _)| *p));
-        model = geometric::refine(&selected, &start, cfg.geometric_iterations);
+        let refined = geometric::refine(&selected, &model, cfg.geometric_iterations);
+        if !plausible(&refined) {
+            break;
+        }
+        model = refined;
         used = Some(keep.clone());
-        band = (cfg.adaptive_inlier_sigmas * robust_sigma(xy, &model, &keep, &mut scratch))
-            .clamp(min_band, initial_band.max(min_band));
+        let sigma = robust_sigma(xy, &model, &keep, &mut scratch);
+        band = (cfg.adaptive_inlier_sigmas * sigma).max(min_band);
         count = select(xy, &model, band, &mut next);
         if next == keep {
             break;
@@ -134,9 +263,6 @@ pub(crate) fn fit(
         std::mem::swap(&mut keep, &mut next);
     }
     let inliers = used.ok_or(FitError::NoEllipse)?;
-    if !(model.a.is_finite() && model.b > 0.0) {
-        return Err(FitError::NoEllipse);
-    }
     Ok((model, inliers))
 }
 

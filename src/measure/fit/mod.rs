@@ -79,22 +79,25 @@ pub struct FitConfig {
     pub adaptive_subsets: usize,
     /// Adaptive: points per subset (>= 5).
     pub adaptive_subset_size: usize,
-    /// Adaptive: clusters merge while their distance is below
-    /// `adaptive_cluster_relative * radius + adaptive_cluster_px`.
+    /// Adaptive: classes merge while their distance is below
+    /// `adaptive_cluster_relative * rms_radius + adaptive_cluster_px`, where
+    /// `rms_radius` is the points' RMS distance from their centroid.
     pub adaptive_cluster_relative: f64,
     /// Adaptive: absolute part of the cluster tolerance, pixels.
     pub adaptive_cluster_px: f64,
-    /// Adaptive: how many of the biggest clusters are scored by consensus.
+    /// Adaptive: how many class centres (most support in the first band)
+    /// are optimised locally and compete by consensus.
     pub adaptive_clusters_scored: usize,
-    /// Adaptive: initial inlier band around a cluster's model, relative to
-    /// its mean radius (plus `adaptive_inlier_min_px`).
+    /// Adaptive: initial inlier band around a class centre's ellipse,
+    /// relative to the points' RMS radius (plus `adaptive_inlier_min_px`).
     pub adaptive_initial_band_relative: f64,
     /// Adaptive: the inlier band shrinks to this many robust sigmas of the
     /// residuals.
     pub adaptive_inlier_sigmas: f64,
     /// Adaptive: the inlier band never gets narrower than this, pixels.
     pub adaptive_inlier_min_px: f64,
-    /// Adaptive: rounds of (select inliers, refit).
+    /// Adaptive: at most this many rounds of (select inliers, Taubin refit)
+    /// per candidate.
     pub adaptive_refine_rounds: usize,
     /// Adaptive: Levenberg-Marquardt iterations of the orthogonal-distance
     /// refinement.
@@ -357,11 +360,6 @@ impl Points {
             rms_residual_px,
         })
     }
-}
-
-/// The ellipse's mean semi-axis, a size for relative tolerances.
-pub(crate) fn mean_radius(e: &Ellipse) -> f64 {
-    0.5 * (e.a + e.b)
 }
 
 #[cfg(test)]
