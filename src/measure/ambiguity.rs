@@ -20,12 +20,17 @@ use nalgebra::Vector3;
 
 /// Points sampled along the predicted rim.
 const SAMPLES: usize = 180;
-/// How far across the predicted curve an edge may be, pixels. Covers the
-/// prediction's own error: the inner ellipse's fit error, scaled up by the
-/// canopy/inner radius ratio (about 2.2), plus the edge's blur.
-const SEARCH_PX: f64 = 2.0;
+/// How far across the predicted curve the edge is looked for, pixels.
+const SEARCH_PX: f64 = 3.0;
 /// Step of the search across the curve, pixels.
 const SEARCH_STEP_PX: f64 = 0.5;
+/// How close to the predicted curve the edge must be to support the pose,
+/// pixels. The two solutions' predicted rims can be only a pixel or two
+/// apart at small tilts, so this is tight; it still covers the prediction's
+/// own error: the inner ellipse's fit error (~0.1 px) scaled up by the
+/// canopy/inner radius ratio (about 2.2), plus the edge's sub-pixel
+/// localisation error.
+const TOLERANCE_PX: f64 = 0.75;
 /// Smallest outward brightening that counts as an edge, grey levels per pixel
 /// (central difference over 2 px). Sensor noise of ~1.5 grey levels gives
 /// ~1 grey level/px of derivative noise: 6 keeps noise-only maxima out, while
@@ -54,25 +59,44 @@ fn grey_at(image: &GrayImage, u: f64, v: f64) -> Option<f64> {
     Some(top * (1.0 - fv) + bottom * fv)
 }
 
-/// Strongest outward brightening within `SEARCH_PX` of `p` along the unit
-/// image direction `out`, grey levels per pixel; `None` if the search leaves
-/// the image.
-fn outward_edge(image: &GrayImage, p: [f64; 2], out: [f64; 2]) -> Option<f64> {
+/// Where across the predicted curve the strongest outward brightening lies:
+/// its offset from `p` along the unit image direction `out` (pixels,
+/// sub-pixel by a parabola through the peak) if it is within `SEARCH_PX` and
+/// at least `MIN_EDGE_GREY_PER_PX` strong; `Some(None)` for no edge; `None`
+/// if the search leaves the image.
+fn outward_edge_offset(image: &GrayImage, p: [f64; 2], out: [f64; 2]) -> Option<Option<f64>> {
     let steps = (SEARCH_PX / SEARCH_STEP_PX).round() as i32;
-    let mut best = f64::NEG_INFINITY;
-    for k in -steps..=steps {
-        let o = f64::from(k) * SEARCH_STEP_PX;
+    let gradient = |o: f64| -> Option<f64> {
         let at = |d: f64| grey_at(image, p[0] + out[0] * (o + d), p[1] + out[1] * (o + d));
-        best = best.max((at(1.0)? - at(-1.0)?) / 2.0);
+        Some((at(1.0)? - at(-1.0)?) / 2.0)
+    };
+    let mut profile = Vec::with_capacity(2 * steps as usize + 1);
+    for k in -steps..=steps {
+        profile.push(gradient(f64::from(k) * SEARCH_STEP_PX)?);
     }
-    Some(best)
+    let (i_best, &best) = profile
+        .iter()
+        .enumerate()
+        .max_by(|a, b| a.1.total_cmp(b.1))?;
+    if best < MIN_EDGE_GREY_PER_PX {
+        return Some(None);
+    }
+    let mut offset = (i_best as f64 - steps as f64) * SEARCH_STEP_PX;
+    if i_best > 0 && i_best + 1 < profile.len() {
+        let (l, c, r) = (profile[i_best - 1], best, profile[i_best + 1]);
+        let curvature = l - 2.0 * c + r;
+        if curvature < 0.0 {
+            offset += 0.5 * (l - r) / curvature * SEARCH_STEP_PX;
+        }
+    }
+    Some(Some(offset))
 }
 
 /// Image evidence (0..1) that the canopy's outer rim, a circle of
 /// `canopy_radius_m` concentric with the inner circle and in its plane, lies
 /// where `pose` predicts it: the share of points along the predicted rim
 /// (projected through the camera's distortion) with an outward-brightening
-/// edge within `SEARCH_PX`. `None` where the rim cannot be judged: less than
+/// edge within `TOLERANCE_PX` of it. `None` where the rim cannot be judged: less than
 /// half of it in the image, or too small. A rim hidden by clouds, glare or
 /// the hose gives a low support for both solutions; the tracker then does not
 /// use it.
@@ -124,9 +148,9 @@ pub fn canopy_support(
         max_u = max_u.max(p[0]);
         min_v = min_v.min(p[1]);
         max_v = max_v.max(p[1]);
-        if let Some(edge) = outward_edge(image, p, [d[0] / len, d[1] / len]) {
+        if let Some(edge) = outward_edge_offset(image, p, [d[0] / len, d[1] / len]) {
             judged += 1;
-            if edge >= MIN_EDGE_GREY_PER_PX {
+            if edge.is_some_and(|o| o.abs() <= TOLERANCE_PX) {
                 with_edge += 1;
             }
         }
