@@ -24,7 +24,7 @@ pub struct TrackConfig {
     /// ...and the better one has at least this support (0..1).
     pub canopy_min_support: f64,
     /// Continuity settles it when one solution's normal is closer to the
-    /// tracked normal than the other's by at least this, degrees.
+    /// tracked normal (extrapolated at constant angular velocity) than the other's by at least this, degrees.
     pub continuity_margin_deg: f64,
 }
 
@@ -46,6 +46,8 @@ struct TrackState {
     /// Rate of change of `ellipse` per second, once two detections are known.
     velocity_per_s: Option<EllipseParams>,
     normal_camera: Vector3<f64>,
+    /// Rate of change of the (unit) normal per second, once two are known.
+    normal_velocity_per_s: Option<Vector3<f64>>,
     /// The tracked normal came from a settled ambiguity (rim or continuity
     /// from a settled one), so continuity may settle the next frame.
     resolved: bool,
@@ -63,6 +65,31 @@ pub struct Tracker {
 
 fn angle(a: &Vector3<f64>, b: &Vector3<f64>) -> f64 {
     a.cross(b).norm().atan2(a.dot(b))
+}
+
+/// Longest extrapolation of the normal, radians (about 11 degrees): a
+/// prediction further out than that is no better than the last normal.
+const MAX_NORMAL_EXTRAPOLATION_RAD: f64 = 0.2;
+
+impl TrackState {
+    /// The normal expected at `time_ns`, by constant angular velocity. This
+    /// matters when the drogue swings through a frontal view: there the two
+    /// solutions meet and part again, the true one carrying on, the mirror
+    /// one turning back; the last normal alone cannot tell them apart.
+    fn predicted_normal(&self, time_ns: u64) -> Vector3<f64> {
+        let Some(v) = self.normal_velocity_per_s else {
+            return self.normal_camera;
+        };
+        let dt_s = time_ns.saturating_sub(self.time_ns) as f64 * 1e-9;
+        let mut step = v * dt_s;
+        let len = step.norm();
+        if len > MAX_NORMAL_EXTRAPOLATION_RAD {
+            step *= MAX_NORMAL_EXTRAPOLATION_RAD / len;
+        }
+        (self.normal_camera + step)
+            .try_normalize(f64::EPSILON)
+            .unwrap_or(self.normal_camera)
+    }
 }
 
 impl Tracker {
@@ -107,7 +134,7 @@ impl Tracker {
 
     /// Picks one of the two cone solutions and updates the track:
     /// the canopy rim when it decides, else continuity with a settled track,
-    /// else unresolved (the solution nearest the track's normal, or the first,
+    /// else unresolved (the solution nearest the track's predicted normal, or the first,
     /// with the other reported as `alternative`).
     pub fn choose(
         &mut self,
@@ -135,8 +162,9 @@ impl Tracker {
             _ => None,
         };
         let nearest_to_track = previous.map(|t| {
-            let a0 = angle(&solutions[0].normal_camera, &t.normal_camera);
-            let a1 = angle(&solutions[1].normal_camera, &t.normal_camera);
+            let expected = t.predicted_normal(capture_time_ns);
+            let a0 = angle(&solutions[0].normal_camera, &expected);
+            let a1 = angle(&solutions[1].normal_camera, &expected);
             let apart = angle(&solutions[0].normal_camera, &solutions[1].normal_camera);
             // Decisive if one is clearly nearer, or if the two solutions are
             // the same pose to within the margin (then either is right).
@@ -153,15 +181,20 @@ impl Tracker {
         let pose = solutions[index];
 
         let params = ellipse_params(ellipse_px);
-        let velocity_per_s = previous.and_then(|t| {
-            let dt_s = (capture_time_ns - t.time_ns) as f64 * 1e-9;
-            (dt_s > 0.0).then(|| (params - t.ellipse) / dt_s)
-        });
+        let dt_s = previous.map(|t| (capture_time_ns - t.time_ns) as f64 * 1e-9);
+        let (velocity_per_s, normal_velocity_per_s) = match (previous, dt_s) {
+            (Some(t), Some(dt)) if dt > 0.0 => (
+                Some((params - t.ellipse) / dt),
+                Some((pose.normal_camera - t.normal_camera) / dt),
+            ),
+            _ => (None, None),
+        };
         self.track = Some(TrackState {
             time_ns: capture_time_ns,
             ellipse: params,
             velocity_per_s,
             normal_camera: pose.normal_camera,
+            normal_velocity_per_s,
             resolved: how != Disambiguation::Unresolved,
         });
         Choice {
