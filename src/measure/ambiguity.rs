@@ -18,8 +18,8 @@ use crate::camera::CameraModel;
 use image::GrayImage;
 use nalgebra::Vector3;
 
-/// Points sampled along the predicted rim.
-const SAMPLES: usize = 180;
+/// Points sampled along the predicted rim (every 3 degrees of the circle).
+const SAMPLES: usize = 120;
 /// How far across the predicted curve the edge is looked for, pixels.
 const SEARCH_PX: f64 = 3.0;
 /// Step of the search across the curve, pixels.
@@ -51,13 +51,22 @@ fn grey_at(image: &GrayImage, u: f64, v: f64) -> Option<f64> {
     }
     let (u0, v0) = (u.floor(), v.floor());
     let (fu, fv) = (u - u0, v - v0);
-    let (x0, y0) = (u0 as u32, v0 as u32);
+    let (x0, y0) = (u0 as usize, v0 as usize);
+    let (w, h) = (w as usize, h as usize);
     let (x1, y1) = ((x0 + 1).min(w - 1), (y0 + 1).min(h - 1));
-    let g = |x: u32, y: u32| f64::from(image.get_pixel(x, y).0[0]);
+    let raw = image.as_raw();
+    let g = |x: usize, y: usize| f64::from(raw[y * w + x]);
     let top = g(x0, y0) * (1.0 - fu) + g(x1, y0) * fu;
     let bottom = g(x0, y1) * (1.0 - fu) + g(x1, y1) * fu;
     Some(top * (1.0 - fv) + bottom * fv)
 }
+
+/// Offsets searched across the curve: -SEARCH_PX..=SEARCH_PX.
+const SEARCH_STEPS: usize = (2.0 * SEARCH_PX / SEARCH_STEP_PX) as usize + 1;
+/// Grey values sampled across the curve: the search band plus the 1 px on
+/// each side that the central difference needs.
+const PROFILE_LEN: usize = SEARCH_STEPS + 2 * STEPS_PER_PX;
+const STEPS_PER_PX: usize = (1.0 / SEARCH_STEP_PX) as usize;
 
 /// Where across the predicted curve the strongest outward brightening lies:
 /// its offset from `p` along the unit image direction `out` (pixels,
@@ -65,25 +74,27 @@ fn grey_at(image: &GrayImage, u: f64, v: f64) -> Option<f64> {
 /// at least `MIN_EDGE_GREY_PER_PX` strong; `Some(None)` for no edge; `None`
 /// if the search leaves the image.
 fn outward_edge_offset(image: &GrayImage, p: [f64; 2], out: [f64; 2]) -> Option<Option<f64>> {
-    let steps = (SEARCH_PX / SEARCH_STEP_PX).round() as i32;
-    let gradient = |o: f64| -> Option<f64> {
-        let at = |d: f64| grey_at(image, p[0] + out[0] * (o + d), p[1] + out[1] * (o + d));
-        Some((at(1.0)? - at(-1.0)?) / 2.0)
-    };
-    let mut profile = Vec::with_capacity(2 * steps as usize + 1);
-    for k in -steps..=steps {
-        profile.push(gradient(f64::from(k) * SEARCH_STEP_PX)?);
+    let start = -SEARCH_PX - 1.0;
+    let mut grey = [0.0; PROFILE_LEN];
+    for (j, g) in grey.iter_mut().enumerate() {
+        let o = start + j as f64 * SEARCH_STEP_PX;
+        *g = grey_at(image, p[0] + out[0] * o, p[1] + out[1] * o)?;
     }
-    let (i_best, &best) = profile
+    // Central difference over 2 px at each searched offset.
+    let mut gradient = [0.0; SEARCH_STEPS];
+    for (i, g) in gradient.iter_mut().enumerate() {
+        *g = (grey[i + 2 * STEPS_PER_PX] - grey[i]) / 2.0;
+    }
+    let (i_best, &best) = gradient
         .iter()
         .enumerate()
         .max_by(|a, b| a.1.total_cmp(b.1))?;
     if best < MIN_EDGE_GREY_PER_PX {
         return Some(None);
     }
-    let mut offset = (i_best as f64 - steps as f64) * SEARCH_STEP_PX;
-    if i_best > 0 && i_best + 1 < profile.len() {
-        let (l, c, r) = (profile[i_best - 1], best, profile[i_best + 1]);
+    let mut offset = i_best as f64 * SEARCH_STEP_PX - SEARCH_PX;
+    if i_best > 0 && i_best + 1 < SEARCH_STEPS {
+        let (l, c, r) = (gradient[i_best - 1], best, gradient[i_best + 1]);
         let curvature = l - 2.0 * c + r;
         if curvature < 0.0 {
             offset += 0.5 * (l - r) / curvature * SEARCH_STEP_PX;
