@@ -80,7 +80,7 @@ fn bench(c: &mut Criterion) {
         b.iter(|| canopy_support(&image, &cam, black_box(&solutions[0]), 0.33))
     });
     c.bench_function("pose_stage_per_frame", |b| {
-        let mut tracker = Tracker::new(&config.track);
+        let mut tracker = Tracker::new(&config.track).unwrap();
         let mut t_ns = 0u64;
         b.iter(|| {
             let [s0, s1]: [CirclePose; 2] = cone_pose(black_box(&ellipse), &cam, 0.15).unwrap();

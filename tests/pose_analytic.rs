@@ -409,7 +409,7 @@ fn covariance_is_consistent_with_actual_errors() {
 #[test]
 fn continuity_follows_a_drogue_swinging_through_frontal() {
     let cam = camera();
-    let mut tracker = Tracker::new(&Config::embedded().track);
+    let mut tracker = Tracker::new(&Config::embedded().track).unwrap();
     let radius = 0.15;
     let frames = 300;
     let mut worst_deg = 0f64;

@@ -137,7 +137,9 @@ fn answer_given_with_fit_error(
             let solutions = cone_pose(&disturbed, &camera, t.radius).expect("a pose");
             let supports = solutions
                 .map(|s| canopy_support(&image, &camera, &s, config.drogue.canopy_radius_m));
-            let choice = Tracker::new(&config.track).choose(solutions, supports, 0, &disturbed);
+            let choice = Tracker::new(&config.track)
+                .unwrap()
+                .choose(solutions, supports, 0, &disturbed);
             let err = angle(&choice.pose.normal_camera, &t.normal);
             let wrong = err > angle(&choice.pose.normal_camera, &t.alt_normal);
             if t.tilt_deg > 5.0 {
@@ -236,7 +238,7 @@ fn truth_ellipse_gives_truth_pose_and_rim_picks_it(set_name: &str) {
 
         let image = image::open(set.join(name)).unwrap().to_luma8();
         let supports = solutions.map(|s| canopy_support(&image, &camera, &s, canopy_radius));
-        let mut tracker = Tracker::new(&config.track);
+        let mut tracker = Tracker::new(&config.track).unwrap();
         let choice = tracker.choose(solutions, supports, 0, &ellipse);
         println!(
             "    canopy support: true {:?}, mirror {:?} -> {:?}",

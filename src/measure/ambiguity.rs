@@ -180,8 +180,12 @@ mod tests {
     use nalgebra::Matrix3;
 
     fn camera() -> CameraModel {
+        lens([0.0; 5])
+    }
+
+    fn lens(distortion: [f64; 5]) -> CameraModel {
         let k = Matrix3::new(800.0, 0.0, 320.0, 0.0, 800.0, 240.0, 0.0, 0.0, 1.0);
-        CameraModel::new("t", 640, 480, k, [0.0; 5]).unwrap()
+        CameraModel::new("t", 640, 480, k, distortion).unwrap()
     }
 
     /// Paints a synthetic drogue, exact per pixel centre: sky 170, canopy 150,
@@ -189,7 +193,7 @@ mod tests {
     fn render(cam: &CameraModel, pose: &CirclePose) -> GrayImage {
         let n = pose.normal_camera;
         GrayImage::from_fn(640, 480, |x, y| {
-            let ray = cam.ray_camera([f64::from(x), f64::from(y)]);
+            let ray = cam.ray_camera(cam.undistort_px([f64::from(x), f64::from(y)]));
             let t = n.dot(&pose.centre_camera_m) / n.dot(&ray);
             let r = (ray * t - pose.centre_camera_m).norm();
             let g = if r < 0.15 {
@@ -207,10 +211,24 @@ mod tests {
 
     #[test]
     fn the_true_pose_has_the_support() {
-        let cam = camera();
+        support_through(&camera(), Vector3::new(0.1, -0.05, 3.0));
+    }
+
+    #[test]
+    fn the_true_pose_has_the_support_through_lens_distortion() {
+        // Strong barrel distortion: an undistorted prediction would miss.
+        // Off-centre, where it moves the rim by several pixels.
+        support_through(
+            &lens([-0.3, 0.1, 0.001, -0.001, 0.0]),
+            Vector3::new(0.6, 0.4, 3.0),
+        );
+    }
+
+    fn support_through(cam: &CameraModel, centre_camera_m: Vector3<f64>) {
+        let cam = cam.clone();
         let n = nalgebra::Rotation3::new(Vector3::new(0.0, 0.6, 0.2)) * -Vector3::z();
         let truth = CirclePose {
-            centre_camera_m: Vector3::new(0.1, -0.05, 3.0),
+            centre_camera_m,
             normal_camera: n.normalize(),
         };
         let image = render(&cam, &truth);

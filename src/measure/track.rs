@@ -93,23 +93,34 @@ impl TrackState {
 }
 
 impl Tracker {
-    pub fn new(cfg: &TrackConfig) -> Self {
-        // Config values are checked for range here rather than rejected: a
-        // negative or NaN gap simply means "no tracking across frames".
-        let gap_ms = if cfg.max_gap_ms.is_finite() {
-            cfg.max_gap_ms.max(0.0)
-        } else {
-            0.0
-        };
-        Self {
-            max_gap_ns: (gap_ms * 1e6) as u64,
+    /// A tracker with no track yet; the config is checked here, and a value
+    /// out of range is named in the error.
+    pub fn new(cfg: &TrackConfig) -> Result<Self, String> {
+        let checks = [
+            ("max_gap_ms", cfg.max_gap_ms, 0.0, 3.6e6),
+            ("canopy_min_difference", cfg.canopy_min_difference, 0.0, 1.0),
+            ("canopy_min_support", cfg.canopy_min_support, 0.0, 1.0),
+            (
+                "continuity_margin_deg",
+                cfg.continuity_margin_deg,
+                0.0,
+                90.0,
+            ),
+        ];
+        for (key, value, min, max) in checks {
+            if !(min..=max).contains(&value) {
+                return Err(format!("{key} = {value}: expected {min} to {max}"));
+            }
+        }
+        Ok(Self {
+            max_gap_ns: (cfg.max_gap_ms * 1e6) as u64,
             canopy_min_difference: cfg.canopy_min_difference,
             canopy_min_support: cfg.canopy_min_support,
             continuity_margin_rad: cfg.continuity_margin_deg.to_radians(),
             track: None,
             epoch: 0,
             tracked_before: false,
-        }
+        })
     }
 
     /// The current track, if it is still fresh at `time_ns`.
@@ -249,7 +260,7 @@ mod tests {
 
     #[test]
     fn canopy_then_continuity_then_unresolved_after_a_loss() {
-        let mut t = Tracker::new(&config());
+        let mut t = Tracker::new(&config()).unwrap();
         // Frame 1: the rim supports the second solution.
         let c = t.choose(
             [pose(0.5), pose(-0.5)],
@@ -318,7 +329,7 @@ mod tests {
 
     #[test]
     fn prediction_is_constant_velocity() {
-        let mut t = Tracker::new(&config());
+        let mut t = Tracker::new(&config()).unwrap();
         assert!(t.search_hint(0).is_none());
         t.choose([pose(0.3), pose(-0.3)], [None, None], 0, &ellipse(100.0));
         // One detection: the hint is the last ellipse.
@@ -348,8 +359,23 @@ mod tests {
     }
 
     #[test]
+    fn bad_config_is_named() {
+        let mut c = config();
+        c.max_gap_ms = f64::NAN;
+        assert!(Tracker::new(&c).err().unwrap().contains("max_gap_ms"));
+        let mut c = config();
+        c.canopy_min_support = 1.5;
+        assert!(
+            Tracker::new(&c)
+                .err()
+                .unwrap()
+                .contains("canopy_min_support")
+        );
+    }
+
+    #[test]
     fn weak_or_equal_rim_support_does_not_decide() {
-        let mut t = Tracker::new(&config());
+        let mut t = Tracker::new(&config()).unwrap();
         // Both weak (rim hidden): no decision even with a large difference
         // in relative terms.
         let c = t.choose(
