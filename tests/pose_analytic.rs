@@ -9,9 +9,11 @@
 //! with the paper's construction on both solutions.
 
 use drogue_vision::camera::CameraModel;
-use drogue_vision::measure::FitQuality;
+use drogue_vision::config::Config;
 use drogue_vision::measure::ellipse::{Conic, Ellipse};
 use drogue_vision::measure::pose::{CirclePose, cone_pose, pose_uncertainty};
+use drogue_vision::measure::track::Tracker;
+use drogue_vision::measure::{Disambiguation, FitQuality};
 use nalgebra::{Matrix2, Matrix3, SMatrix, SVector, Vector2, Vector3};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -397,4 +399,60 @@ fn covariance_is_consistent_with_actual_errors() {
             "normal error^2 / sigma^2 = {normal_ratio}"
         );
     }
+}
+
+/// A drogue approaching from 20 m to 3 m while its normal swings through the
+/// frontal view and back (tilt from +20 to -20 degrees about a slowly turning
+/// axis). The canopy rim is seen in the first frame only; continuity must
+/// then keep the true solution in every frame, across the frontal crossings
+/// where the two solutions meet.
+#[test]
+fn continuity_follows_a_drogue_swinging_through_frontal() {
+    let cam = camera();
+    let mut tracker = Tracker::new(&Config::embedded().track).unwrap();
+    let radius = 0.15;
+    let frames = 300;
+    let mut worst_deg = 0f64;
+    for k in 0..frames {
+        let time_s = k as f64 / 30.0;
+        let range = 20.0 - 17.0 * k as f64 / frames as f64;
+        let centre = Vector3::new(0.3 * (0.5 * time_s).sin(), -0.2, range);
+        let toward_camera = -centre.normalize();
+        let tilt = 20f64.to_radians() * (std::f64::consts::TAU * time_s / 4.0).cos();
+        let axis_angle = 0.3 + 0.1 * time_s;
+        let (u, v) = plane_basis(&toward_camera);
+        let axis = axis_angle.cos() * u + axis_angle.sin() * v;
+        let truth = CirclePose {
+            centre_camera_m: centre,
+            normal_camera: nalgebra::Rotation3::new(axis * tilt) * toward_camera,
+        };
+        let ellipse = exact_ellipse(&cam, &truth, radius);
+        let solutions = cone_pose(&ellipse, &cam, radius).unwrap();
+        let i = nearest(&solutions, &truth);
+        let supports = if k == 0 {
+            let mut s = [Some(0.0); 2];
+            s[i] = Some(1.0);
+            s
+        } else {
+            [None, None]
+        };
+        let choice = tracker.choose(solutions, supports, (time_s * 1e9) as u64, &ellipse);
+        let expected_how = if k == 0 {
+            Disambiguation::CanopyRim
+        } else {
+            Disambiguation::Continuity
+        };
+        assert_eq!(choice.how, expected_how, "frame {k}");
+        let err = angle(&choice.pose.normal_camera, &truth.normal_camera);
+        // Right solution; at the crossing itself both are within 2 x tilt.
+        assert!(
+            err < 1e-6 || err <= 2.0 * tilt.abs() + 1e-9,
+            "frame {k}: tilt {:.2} deg, chosen normal {:.2} deg off",
+            tilt.to_degrees(),
+            err.to_degrees()
+        );
+        worst_deg = worst_deg.max(err.to_degrees());
+        assert_eq!(choice.track_epoch, 0);
+    }
+    println!("swinging drogue: worst normal error {worst_deg:.2e} deg over {frames} frames");
 }

@@ -14,12 +14,19 @@ use drogue_vision::measure::ellipse::Ellipse;
 use drogue_vision::measure::pose::{CirclePose, cone_pose};
 use drogue_vision::measure::track::Tracker;
 use nalgebra::Vector3;
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
 use serde_json::Value;
+use std::io::Write;
 use std::path::PathBuf;
 
 fn reference_set(name: &str) -> Option<PathBuf> {
     let Some(dir) = std::env::var_os("DROGUE_REFERENCE_DIR") else {
-        eprintln!("SKIPPED: DROGUE_REFERENCE_DIR is not set (the reference frames' folder)");
+        // Straight to stderr: the test harness captures eprintln! output.
+        let _ = writeln!(
+            std::io::stderr(),
+            "SKIPPED: DROGUE_REFERENCE_DIR is not set (the reference frames' folder)"
+        );
         return None;
     };
     let set = PathBuf::from(dir).join(name);
@@ -44,36 +51,170 @@ fn angle(a: &Vector3<f64>, b: &Vector3<f64>) -> f64 {
     a.cross(b).norm().atan2(a.dot(b))
 }
 
+/// One reference frame's truth, as used here.
+struct Truth {
+    name: String,
+    radius: f64,
+    ellipse: Ellipse,
+    position: Vector3<f64>,
+    normal: Vector3<f64>,
+    alt_position: Vector3<f64>,
+    alt_normal: Vector3<f64>,
+    tilt_deg: f64,
+    range_m: f64,
+}
+
+fn read_truth(set: &std::path::Path) -> Vec<Truth> {
+    let text = std::fs::read_to_string(set.join("truth.jsonl")).unwrap();
+    text.lines()
+        .filter(|l| !l.trim().is_empty())
+        .map(|line| {
+            let t: Value = serde_json::from_str(line).unwrap();
+            let e = &t["ellipse"];
+            let f = |v: &Value| v.as_f64().unwrap();
+            Truth {
+                name: t["frame"].as_str().unwrap().to_string(),
+                radius: f(&t["radius"]),
+                ellipse: Ellipse::new(
+                    f(&e["cx"]),
+                    f(&e["cy"]),
+                    f(&e["a"]),
+                    f(&e["b"]),
+                    f(&e["theta"]),
+                ),
+                position: vec3(&t["position_camera"]),
+                normal: vec3(&t["normal_camera"]),
+                alt_position: vec3(&t["alt_position_camera"]),
+                alt_normal: vec3(&t["alt_normal_camera"]),
+                tilt_deg: f(&t["tilt_deg"]),
+                range_m: f(&t["range_m"]),
+            }
+        })
+        .collect()
+}
+
+/// How the canopy rim decided on frames tilted more than 5 degrees.
+#[derive(Debug, Default)]
+struct RimStats {
+    rim_right: usize,
+    rim_wrong: usize,
+    unresolved: usize,
+}
+
+/// Standard normal sample (Box-Muller).
+fn gauss(rng: &mut ChaCha8Rng) -> f64 {
+    let u1: f64 = rng.random_range(f64::MIN_POSITIVE..1.0);
+    let u2: f64 = rng.random();
+    (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
+}
+
+/// The whole pose stage (cone pose, canopy rim, tracker decision on a fresh
+/// track) on each frame of `set`, with the truth ellipse disturbed by
+/// Gaussian errors of `sigma_px` on centre and semi-axes (and the matching
+/// angle error, sigma_px / a): the accuracy of the answer given, counting the
+/// ambiguity, for fits of that quality.
+fn answer_given_with_fit_error(
+    set_name: &str,
+    sigma_px: f64,
+) -> Option<(Vec<f64>, Vec<f64>, RimStats)> {
+    let set = reference_set(set_name)?;
+    let camera = CameraModel::load(&set.join("camera.yaml")).unwrap();
+    let config = Config::embedded();
+    let mut rng = ChaCha8Rng::seed_from_u64(21);
+    let (mut normal_err_deg, mut position_err_pct) = (Vec::new(), Vec::new());
+    let mut stats = RimStats::default();
+    for t in read_truth(&set) {
+        let image = image::open(set.join(&t.name)).unwrap().to_luma8();
+        for _ in 0..20 {
+            let e = t.ellipse;
+            let disturbed = Ellipse::new(
+                e.cx + sigma_px * gauss(&mut rng),
+                e.cy + sigma_px * gauss(&mut rng),
+                e.a + sigma_px * gauss(&mut rng),
+                e.b + sigma_px * gauss(&mut rng),
+                e.theta + sigma_px / e.a * gauss(&mut rng),
+            );
+            let solutions = cone_pose(&disturbed, &camera, t.radius).expect("a pose");
+            let supports = solutions
+                .map(|s| canopy_support(&image, &camera, &s, config.drogue.canopy_radius_m));
+            let choice = Tracker::new(&config.track)
+                .unwrap()
+                .choose(solutions, supports, 0, &disturbed);
+            let err = angle(&choice.pose.normal_camera, &t.normal);
+            let wrong = err > angle(&choice.pose.normal_camera, &t.alt_normal);
+            if t.tilt_deg > 5.0 {
+                match (choice.how, wrong) {
+                    (Disambiguation::CanopyRim, true) => stats.rim_wrong += 1,
+                    (Disambiguation::CanopyRim, false) => stats.rim_right += 1,
+                    _ => stats.unresolved += 1,
+                }
+            }
+            normal_err_deg.push(err.to_degrees());
+            position_err_pct
+                .push(100.0 * (choice.pose.centre_camera_m - t.position).norm() / t.range_m);
+        }
+    }
+    normal_err_deg.sort_by(f64::total_cmp);
+    position_err_pct.sort_by(f64::total_cmp);
+    Some((normal_err_deg, position_err_pct, stats))
+}
+
+fn percentile(sorted: &[f64], p: f64) -> f64 {
+    sorted[((sorted.len() - 1) as f64 * p).round() as usize]
+}
+
+#[test]
+fn answer_given_with_realistic_fit_errors() {
+    for set in ["paper10", "occlusion"] {
+        for sigma_px in [0.05, 0.1, 0.2] {
+            let Some((normal, position, rim)) = answer_given_with_fit_error(set, sigma_px) else {
+                return;
+            };
+            println!(
+                "{set}, ellipse error sigma {sigma_px} px: normal median {:.2} p95 {:.2} deg; \
+                 position median {:.3} p95 {:.3} % of range; of {} answers, tilt > 5 deg: {rim:?}",
+                percentile(&normal, 0.5),
+                percentile(&normal, 0.95),
+                percentile(&position, 0.5),
+                percentile(&position, 0.95),
+                normal.len()
+            );
+            if sigma_px <= 0.1 {
+                // The issue's targets, for fits as good as the fit's own
+                // target (median error <= 0.1 px).
+                assert!(percentile(&normal, 0.5) <= 0.5, "{set}: normal median");
+                assert!(percentile(&position, 0.5) <= 0.3, "{set}: position median");
+                assert!(percentile(&position, 0.95) <= 1.0, "{set}: position p95");
+                assert_eq!(rim.unresolved, 0, "{set}: the rim should decide");
+            }
+            // The rim never settles on the wrong solution.
+            assert_eq!(rim.rim_wrong, 0, "{set}: the rim picked a mirror solution");
+        }
+    }
+}
+
 #[test]
 fn paper10_truth_ellipse_gives_truth_pose_and_rim_picks_it() {
-    let Some(set) = reference_set("paper10") else {
+    truth_ellipse_gives_truth_pose_and_rim_picks_it("paper10");
+}
+
+#[test]
+fn occlusion_truth_ellipse_gives_truth_pose_and_rim_picks_it() {
+    truth_ellipse_gives_truth_pose_and_rim_picks_it("occlusion");
+}
+
+fn truth_ellipse_gives_truth_pose_and_rim_picks_it(set_name: &str) {
+    let Some(set) = reference_set(set_name) else {
         return;
     };
     let camera = CameraModel::load(&set.join("camera.yaml")).unwrap();
     let config = Config::embedded();
     let canopy_radius = config.drogue.canopy_radius_m;
-    let text = std::fs::read_to_string(set.join("truth.jsonl")).unwrap();
     let mut frames = 0;
     let mut answer_errors_deg = Vec::new();
-    for line in text.lines().filter(|l| !l.trim().is_empty()) {
-        let truth: Value = serde_json::from_str(line).unwrap();
-        let name = truth["frame"].as_str().unwrap();
-        let radius = truth["radius"].as_f64().unwrap();
-        let e = &truth["ellipse"];
-        let ellipse = Ellipse::new(
-            e["cx"].as_f64().unwrap(),
-            e["cy"].as_f64().unwrap(),
-            e["a"].as_f64().unwrap(),
-            e["b"].as_f64().unwrap(),
-            e["theta"].as_f64().unwrap(),
-        );
-        let position = vec3(&truth["position_camera"]);
-        let normal = vec3(&truth["normal_camera"]);
-        let alt_position = vec3(&truth["alt_position_camera"]);
-        let alt_normal = vec3(&truth["alt_normal_camera"]);
-        let tilt_deg = truth["tilt_deg"].as_f64().unwrap();
-
-        let solutions = cone_pose(&ellipse, &camera, radius).expect("a pose");
+    for t in read_truth(&set) {
+        let (name, ellipse, normal, tilt_deg) = (t.name.as_str(), t.ellipse, t.normal, t.tilt_deg);
+        let solutions = cone_pose(&ellipse, &camera, t.radius).expect("a pose");
         let i = if angle(&solutions[0].normal_camera, &normal)
             <= angle(&solutions[1].normal_camera, &normal)
         {
@@ -82,10 +223,10 @@ fn paper10_truth_ellipse_gives_truth_pose_and_rim_picks_it() {
             1
         };
         let (found, other): (CirclePose, CirclePose) = (solutions[i], solutions[1 - i]);
-        let pos_err = (found.centre_camera_m - position).norm();
-        let alt_pos_err = (other.centre_camera_m - alt_position).norm();
+        let pos_err = (found.centre_camera_m - t.position).norm();
+        let alt_pos_err = (other.centre_camera_m - t.alt_position).norm();
         let n_err = angle(&found.normal_camera, &normal);
-        let alt_n_err = angle(&other.normal_camera, &alt_normal);
+        let alt_n_err = angle(&other.normal_camera, &t.alt_normal);
         println!(
             "{name}: tilt {tilt_deg:5.1} deg, position {pos_err:.1e} m (alt {alt_pos_err:.1e}), \
              normal {n_err:.1e} rad (alt {alt_n_err:.1e})"
@@ -97,7 +238,7 @@ fn paper10_truth_ellipse_gives_truth_pose_and_rim_picks_it() {
 
         let image = image::open(set.join(name)).unwrap().to_luma8();
         let supports = solutions.map(|s| canopy_support(&image, &camera, &s, canopy_radius));
-        let mut tracker = Tracker::new(&config.track);
+        let mut tracker = Tracker::new(&config.track).unwrap();
         let choice = tracker.choose(solutions, supports, 0, &ellipse);
         println!(
             "    canopy support: true {:?}, mirror {:?} -> {:?}",
@@ -120,7 +261,7 @@ fn paper10_truth_ellipse_gives_truth_pose_and_rim_picks_it() {
         }
         frames += 1;
     }
-    assert_eq!(frames, 10, "paper10 has 10 frames");
+    assert!(frames >= 10, "{set_name} has only {frames} frames");
     answer_errors_deg.sort_by(f64::total_cmp);
     println!(
         "normal error of the answer given (truth ellipse): median {:.2e} deg, max {:.2e} deg",

@@ -18,14 +18,19 @@ use crate::camera::CameraModel;
 use image::GrayImage;
 use nalgebra::Vector3;
 
-/// Points sampled along the predicted rim.
-const SAMPLES: usize = 180;
-/// How far across the predicted curve an edge may be, pixels. Covers the
-/// prediction's own error: the inner ellipse's fit error, scaled up by the
-/// canopy/inner radius ratio (about 2.2), plus the edge's blur.
-const SEARCH_PX: f64 = 2.0;
+/// Points sampled along the predicted rim (every 3 degrees of the circle).
+const SAMPLES: usize = 120;
+/// How far across the predicted curve the edge is looked for, pixels.
+const SEARCH_PX: f64 = 3.0;
 /// Step of the search across the curve, pixels.
 const SEARCH_STEP_PX: f64 = 0.5;
+/// How close to the predicted curve the edge must be to support the pose,
+/// pixels. The two solutions' predicted rims can be only a pixel or two
+/// apart at small tilts, so this is tight; it still covers the prediction's
+/// own error: the inner ellipse's fit error (~0.1 px) scaled up by the
+/// canopy/inner radius ratio (about 2.2), plus the edge's sub-pixel
+/// localisation error.
+const TOLERANCE_PX: f64 = 0.75;
 /// Smallest outward brightening that counts as an edge, grey levels per pixel
 /// (central difference over 2 px). Sensor noise of ~1.5 grey levels gives
 /// ~1 grey level/px of derivative noise: 6 keeps noise-only maxima out, while
@@ -46,33 +51,63 @@ fn grey_at(image: &GrayImage, u: f64, v: f64) -> Option<f64> {
     }
     let (u0, v0) = (u.floor(), v.floor());
     let (fu, fv) = (u - u0, v - v0);
-    let (x0, y0) = (u0 as u32, v0 as u32);
+    let (x0, y0) = (u0 as usize, v0 as usize);
+    let (w, h) = (w as usize, h as usize);
     let (x1, y1) = ((x0 + 1).min(w - 1), (y0 + 1).min(h - 1));
-    let g = |x: u32, y: u32| f64::from(image.get_pixel(x, y).0[0]);
+    let raw = image.as_raw();
+    let g = |x: usize, y: usize| f64::from(raw[y * w + x]);
     let top = g(x0, y0) * (1.0 - fu) + g(x1, y0) * fu;
     let bottom = g(x0, y1) * (1.0 - fu) + g(x1, y1) * fu;
     Some(top * (1.0 - fv) + bottom * fv)
 }
 
-/// Strongest outward brightening within `SEARCH_PX` of `p` along the unit
-/// image direction `out`, grey levels per pixel; `None` if the search leaves
-/// the image.
-fn outward_edge(image: &GrayImage, p: [f64; 2], out: [f64; 2]) -> Option<f64> {
-    let steps = (SEARCH_PX / SEARCH_STEP_PX).round() as i32;
-    let mut best = f64::NEG_INFINITY;
-    for k in -steps..=steps {
-        let o = f64::from(k) * SEARCH_STEP_PX;
-        let at = |d: f64| grey_at(image, p[0] + out[0] * (o + d), p[1] + out[1] * (o + d));
-        best = best.max((at(1.0)? - at(-1.0)?) / 2.0);
+/// Offsets searched across the curve: -SEARCH_PX..=SEARCH_PX.
+const SEARCH_STEPS: usize = (2.0 * SEARCH_PX / SEARCH_STEP_PX) as usize + 1;
+/// Grey values sampled across the curve: the search band plus the 1 px on
+/// each side that the central difference needs.
+const PROFILE_LEN: usize = SEARCH_STEPS + 2 * STEPS_PER_PX;
+const STEPS_PER_PX: usize = (1.0 / SEARCH_STEP_PX) as usize;
+
+/// Where across the predicted curve the strongest outward brightening lies:
+/// its offset from `p` along the unit image direction `out` (pixels,
+/// sub-pixel by a parabola through the peak) if it is within `SEARCH_PX` and
+/// at least `MIN_EDGE_GREY_PER_PX` strong; `Some(None)` for no edge; `None`
+/// if the search leaves the image.
+fn outward_edge_offset(image: &GrayImage, p: [f64; 2], out: [f64; 2]) -> Option<Option<f64>> {
+    let start = -SEARCH_PX - 1.0;
+    let mut grey = [0.0; PROFILE_LEN];
+    for (j, g) in grey.iter_mut().enumerate() {
+        let o = start + j as f64 * SEARCH_STEP_PX;
+        *g = grey_at(image, p[0] + out[0] * o, p[1] + out[1] * o)?;
     }
-    Some(best)
+    // Central difference over 2 px at each searched offset.
+    let mut gradient = [0.0; SEARCH_STEPS];
+    for (i, g) in gradient.iter_mut().enumerate() {
+        *g = (grey[i + 2 * STEPS_PER_PX] - grey[i]) / 2.0;
+    }
+    let (i_best, &best) = gradient
+        .iter()
+        .enumerate()
+        .max_by(|a, b| a.1.total_cmp(b.1))?;
+    if best < MIN_EDGE_GREY_PER_PX {
+        return Some(None);
+    }
+    let mut offset = i_best as f64 * SEARCH_STEP_PX - SEARCH_PX;
+    if i_best > 0 && i_best + 1 < SEARCH_STEPS {
+        let (l, c, r) = (gradient[i_best - 1], best, gradient[i_best + 1]);
+        let curvature = l - 2.0 * c + r;
+        if curvature < 0.0 {
+            offset += 0.5 * (l - r) / curvature * SEARCH_STEP_PX;
+        }
+    }
+    Some(Some(offset))
 }
 
 /// Image evidence (0..1) that the canopy's outer rim, a circle of
 /// `canopy_radius_m` concentric with the inner circle and in its plane, lies
 /// where `pose` predicts it: the share of points along the predicted rim
 /// (projected through the camera's distortion) with an outward-brightening
-/// edge within `SEARCH_PX`. `None` where the rim cannot be judged: less than
+/// edge within `TOLERANCE_PX` of it. `None` where the rim cannot be judged: less than
 /// half of it in the image, or too small. A rim hidden by clouds, glare or
 /// the hose gives a low support for both solutions; the tracker then does not
 /// use it.
@@ -124,9 +159,9 @@ pub fn canopy_support(
         max_u = max_u.max(p[0]);
         min_v = min_v.min(p[1]);
         max_v = max_v.max(p[1]);
-        if let Some(edge) = outward_edge(image, p, [d[0] / len, d[1] / len]) {
+        if let Some(edge) = outward_edge_offset(image, p, [d[0] / len, d[1] / len]) {
             judged += 1;
-            if edge >= MIN_EDGE_GREY_PER_PX {
+            if edge.is_some_and(|o| o.abs() <= TOLERANCE_PX) {
                 with_edge += 1;
             }
         }
@@ -145,8 +180,12 @@ mod tests {
     use nalgebra::Matrix3;
 
     fn camera() -> CameraModel {
+        lens([0.0; 5])
+    }
+
+    fn lens(distortion: [f64; 5]) -> CameraModel {
         let k = Matrix3::new(800.0, 0.0, 320.0, 0.0, 800.0, 240.0, 0.0, 0.0, 1.0);
-        CameraModel::new("t", 640, 480, k, [0.0; 5]).unwrap()
+        CameraModel::new("t", 640, 480, k, distortion).unwrap()
     }
 
     /// Paints a synthetic drogue, exact per pixel centre: sky 170, canopy 150,
@@ -154,7 +193,7 @@ mod tests {
     fn render(cam: &CameraModel, pose: &CirclePose) -> GrayImage {
         let n = pose.normal_camera;
         GrayImage::from_fn(640, 480, |x, y| {
-            let ray = cam.ray_camera([f64::from(x), f64::from(y)]);
+            let ray = cam.ray_camera(cam.undistort_px([f64::from(x), f64::from(y)]));
             let t = n.dot(&pose.centre_camera_m) / n.dot(&ray);
             let r = (ray * t - pose.centre_camera_m).norm();
             let g = if r < 0.15 {
@@ -172,10 +211,24 @@ mod tests {
 
     #[test]
     fn the_true_pose_has_the_support() {
-        let cam = camera();
+        support_through(&camera(), Vector3::new(0.1, -0.05, 3.0));
+    }
+
+    #[test]
+    fn the_true_pose_has_the_support_through_lens_distortion() {
+        // Strong barrel distortion: an undistorted prediction would miss.
+        // Off-centre, where it moves the rim by several pixels.
+        support_through(
+            &lens([-0.3, 0.1, 0.001, -0.001, 0.0]),
+            Vector3::new(0.6, 0.4, 3.0),
+        );
+    }
+
+    fn support_through(cam: &CameraModel, centre_camera_m: Vector3<f64>) {
+        let cam = cam.clone();
         let n = nalgebra::Rotation3::new(Vector3::new(0.0, 0.6, 0.2)) * -Vector3::z();
         let truth = CirclePose {
-            centre_camera_m: Vector3::new(0.1, -0.05, 3.0),
+            centre_camera_m,
             normal_camera: n.normalize(),
         };
         let image = render(&cam, &truth);

@@ -104,6 +104,8 @@ pub enum MeasureSetupError {
     Mount(String),
     #[error("drogue geometry: {0}")]
     Drogue(String),
+    #[error("track: {0}")]
+    Track(String),
 }
 
 /// Runs the whole measurement chain over a sequence of frames. Holds the
@@ -135,7 +137,7 @@ impl Measurer {
         Ok(Self {
             detector: detect::Detector::new(&config.detect, &camera, d.inner_radius_m),
             fitter: fit::Fitter::new(&config.fit),
-            tracker: track::Tracker::new(&config.track),
+            tracker: track::Tracker::new(&config.track).map_err(MeasureSetupError::Track)?,
             inner_radius_m: d.inner_radius_m,
             canopy_radius_m: d.canopy_radius_m,
             camera,

@@ -243,9 +243,11 @@ fn ellipse_covariance(
     let m_inv = m.try_inverse()?;
     let mut jtj = SMatrix::<f64, 5, 5>::zeros();
     for pt in points_px {
-        let w = m_inv * Vector2::new(pt[0] - e.cx, pt[1] - e.cy);
-        let t = w.y.atan2(w.x);
-        let (sin_t, cos_t) = t.sin_cos();
+        // (cos t, sin t) of the point's place on the curve.
+        let Some(w) = (m_inv * Vector2::new(pt[0] - e.cx, pt[1] - e.cy)).try_normalize(0.0) else {
+            continue;
+        };
+        let (cos_t, sin_t) = (w.x, w.y);
         // Outward normal at the curve point c + M (cos t, sin t).
         let n = m_inv * Vector2::new(cos_t, sin_t);
         let n_len = n.norm();
@@ -253,15 +255,20 @@ fn ellipse_covariance(
             continue;
         }
         let n = n / n_len;
-        let row = EllipseParams::new(
+        let row = [
             n.x,
             n.y,
             n.x * cos_t,
             n.x * sin_t + n.y * cos_t,
             n.y * sin_t,
-        );
-        jtj += row * row.transpose();
+        ];
+        for i in 0..5 {
+            for j in i..5 {
+                jtj[(i, j)] += row[i] * row[j];
+            }
+        }
     }
+    jtj.fill_lower_triangle_with_upper_triangle();
     jtj.try_inverse().map(|inv| inv * (sigma_px * sigma_px))
 }
 

@@ -24,7 +24,7 @@ pub struct TrackConfig {
     /// ...and the better one has at least this support (0..1).
     pub canopy_min_support: f64,
     /// Continuity settles it when one solution's normal is closer to the
-    /// tracked normal than the other's by at least this, degrees.
+    /// tracked normal (extrapolated at constant angular velocity) than the other's by at least this, degrees.
     pub continuity_margin_deg: f64,
 }
 
@@ -46,6 +46,8 @@ struct TrackState {
     /// Rate of change of `ellipse` per second, once two detections are known.
     velocity_per_s: Option<EllipseParams>,
     normal_camera: Vector3<f64>,
+    /// Rate of change of the (unit) normal per second, once two are known.
+    normal_velocity_per_s: Option<Vector3<f64>>,
     /// The tracked normal came from a settled ambiguity (rim or continuity
     /// from a settled one), so continuity may settle the next frame.
     resolved: bool,
@@ -65,24 +67,60 @@ fn angle(a: &Vector3<f64>, b: &Vector3<f64>) -> f64 {
     a.cross(b).norm().atan2(a.dot(b))
 }
 
-impl Tracker {
-    pub fn new(cfg: &TrackConfig) -> Self {
-        // Config values are checked for range here rather than rejected: a
-        // negative or NaN gap simply means "no tracking across frames".
-        let gap_ms = if cfg.max_gap_ms.is_finite() {
-            cfg.max_gap_ms.max(0.0)
-        } else {
-            0.0
+/// Longest extrapolation of the normal, radians (about 11 degrees): a
+/// prediction further out than that is no better than the last normal.
+const MAX_NORMAL_EXTRAPOLATION_RAD: f64 = 0.2;
+
+impl TrackState {
+    /// The normal expected at `time_ns`, by constant angular velocity. This
+    /// matters when the drogue swings through a frontal view: there the two
+    /// solutions meet and part again, the true one carrying on, the mirror
+    /// one turning back; the last normal alone cannot tell them apart.
+    fn predicted_normal(&self, time_ns: u64) -> Vector3<f64> {
+        let Some(v) = self.normal_velocity_per_s else {
+            return self.normal_camera;
         };
-        Self {
-            max_gap_ns: (gap_ms * 1e6) as u64,
+        let dt_s = time_ns.saturating_sub(self.time_ns) as f64 * 1e-9;
+        let mut step = v * dt_s;
+        let len = step.norm();
+        if len > MAX_NORMAL_EXTRAPOLATION_RAD {
+            step *= MAX_NORMAL_EXTRAPOLATION_RAD / len;
+        }
+        (self.normal_camera + step)
+            .try_normalize(f64::EPSILON)
+            .unwrap_or(self.normal_camera)
+    }
+}
+
+impl Tracker {
+    /// A tracker with no track yet; the config is checked here, and a value
+    /// out of range is named in the error.
+    pub fn new(cfg: &TrackConfig) -> Result<Self, String> {
+        let checks = [
+            ("max_gap_ms", cfg.max_gap_ms, 0.0, 3.6e6),
+            ("canopy_min_difference", cfg.canopy_min_difference, 0.0, 1.0),
+            ("canopy_min_support", cfg.canopy_min_support, 0.0, 1.0),
+            (
+                "continuity_margin_deg",
+                cfg.continuity_margin_deg,
+                0.0,
+                90.0,
+            ),
+        ];
+        for (key, value, min, max) in checks {
+            if !(min..=max).contains(&value) {
+                return Err(format!("{key} = {value}: expected {min} to {max}"));
+            }
+        }
+        Ok(Self {
+            max_gap_ns: (cfg.max_gap_ms * 1e6) as u64,
             canopy_min_difference: cfg.canopy_min_difference,
             canopy_min_support: cfg.canopy_min_support,
             continuity_margin_rad: cfg.continuity_margin_deg.to_radians(),
             track: None,
             epoch: 0,
             tracked_before: false,
-        }
+        })
     }
 
     /// The current track, if it is still fresh at `time_ns`.
@@ -107,7 +145,7 @@ impl Tracker {
 
     /// Picks one of the two cone solutions and updates the track:
     /// the canopy rim when it decides, else continuity with a settled track,
-    /// else unresolved (the solution nearest the track's normal, or the first,
+    /// else unresolved (the solution nearest the track's predicted normal, or the first,
     /// with the other reported as `alternative`).
     pub fn choose(
         &mut self,
@@ -135,8 +173,9 @@ impl Tracker {
             _ => None,
         };
         let nearest_to_track = previous.map(|t| {
-            let a0 = angle(&solutions[0].normal_camera, &t.normal_camera);
-            let a1 = angle(&solutions[1].normal_camera, &t.normal_camera);
+            let expected = t.predicted_normal(capture_time_ns);
+            let a0 = angle(&solutions[0].normal_camera, &expected);
+            let a1 = angle(&solutions[1].normal_camera, &expected);
             let apart = angle(&solutions[0].normal_camera, &solutions[1].normal_camera);
             // Decisive if one is clearly nearer, or if the two solutions are
             // the same pose to within the margin (then either is right).
@@ -153,15 +192,20 @@ impl Tracker {
         let pose = solutions[index];
 
         let params = ellipse_params(ellipse_px);
-        let velocity_per_s = previous.and_then(|t| {
-            let dt_s = (capture_time_ns - t.time_ns) as f64 * 1e-9;
-            (dt_s > 0.0).then(|| (params - t.ellipse) / dt_s)
-        });
+        let dt_s = previous.map(|t| (capture_time_ns - t.time_ns) as f64 * 1e-9);
+        let (velocity_per_s, normal_velocity_per_s) = match (previous, dt_s) {
+            (Some(t), Some(dt)) if dt > 0.0 => (
+                Some((params - t.ellipse) / dt),
+                Some((pose.normal_camera - t.normal_camera) / dt),
+            ),
+            _ => (None, None),
+        };
         self.track = Some(TrackState {
             time_ns: capture_time_ns,
             ellipse: params,
             velocity_per_s,
             normal_camera: pose.normal_camera,
+            normal_velocity_per_s,
             resolved: how != Disambiguation::Unresolved,
         });
         Choice {
@@ -216,7 +260,7 @@ mod tests {
 
     #[test]
     fn canopy_then_continuity_then_unresolved_after_a_loss() {
-        let mut t = Tracker::new(&config());
+        let mut t = Tracker::new(&config()).unwrap();
         // Frame 1: the rim supports the second solution.
         let c = t.choose(
             [pose(0.5), pose(-0.5)],
@@ -285,7 +329,7 @@ mod tests {
 
     #[test]
     fn prediction_is_constant_velocity() {
-        let mut t = Tracker::new(&config());
+        let mut t = Tracker::new(&config()).unwrap();
         assert!(t.search_hint(0).is_none());
         t.choose([pose(0.3), pose(-0.3)], [None, None], 0, &ellipse(100.0));
         // One detection: the hint is the last ellipse.
@@ -315,8 +359,23 @@ mod tests {
     }
 
     #[test]
+    fn bad_config_is_named() {
+        let mut c = config();
+        c.max_gap_ms = f64::NAN;
+        assert!(Tracker::new(&c).err().unwrap().contains("max_gap_ms"));
+        let mut c = config();
+        c.canopy_min_support = 1.5;
+        assert!(
+            Tracker::new(&c)
+                .err()
+                .unwrap()
+                .contains("canopy_min_support")
+        );
+    }
+
+    #[test]
     fn weak_or_equal_rim_support_does_not_decide() {
-        let mut t = Tracker::new(&config());
+        let mut t = Tracker::new(&config()).unwrap();
         // Both weak (rim hidden): no decision even with a large difference
         // in relative terms.
         let c = t.choose(
