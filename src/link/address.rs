@@ -1,0 +1,135 @@
+//! Connection addresses in the rust-mavlink / MAVProxy forms.
+
+use std::fmt;
+
+/// Where the link talks to the autopilot.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum Address {
+    /// `udpout:HOST:PORT`: send to HOST:PORT from an ephemeral port, receive
+    /// the replies there. Sends even when nobody listens.
+    UdpOut(String),
+    /// `udpin:HOST:PORT`: bind HOST:PORT, reply to whoever sent last. Cannot
+    /// send before the peer has sent something.
+    UdpIn(String),
+    /// `tcpout:HOST:PORT`: connect to a TCP server (SITL, a router);
+    /// reconnects with back-off.
+    TcpOut(String),
+    /// `serial:DEVICE:BAUD`: a UART; reopened with back-off when it fails or
+    /// disappears.
+    Serial { device: String, baud: u32 },
+}
+
+impl fmt::Display for Address {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Self::UdpOut(a) => write!(f, "udpout:{a}"),
+            Self::UdpIn(a) => write!(f, "udpin:{a}"),
+            Self::TcpOut(a) => write!(f, "tcpout:{a}"),
+            Self::Serial { device, baud } => write!(f, "serial:{device}:{baud}"),
+        }
+    }
+}
+
+/// Checks `HOST:PORT` (the host may be a name or an IPv6 literal in brackets).
+fn host_port(s: &str, whole: &str) -> Result<String, String> {
+    let (host, port) = s
+        .rsplit_once(':')
+        .ok_or_else(|| format!("`{whole}`: expected HOST:PORT after the scheme"))?;
+    if host.is_empty() {
+        return Err(format!("`{whole}`: empty host"));
+    }
+    port.parse::<u16>()
+        .map_err(|_| format!("`{whole}`: port `{port}` is not a number 0..65535"))?;
+    Ok(s.to_string())
+}
+
+impl Address {
+    /// Parses `udpout:`, `udpin:`, `tcpout:` or `serial:` addresses.
+    pub fn parse(s: &str) -> Result<Self, String> {
+        let s = s.trim();
+        let (scheme, rest) = s.split_once(':').ok_or_else(|| {
+            format!("`{s}`: expected udpout:HOST:PORT, udpin:HOST:PORT, tcpout:HOST:PORT or serial:DEVICE:BAUD")
+        })?;
+        match scheme {
+            "udpout" | "udp" => Ok(Self::UdpOut(host_port(rest, s)?)),
+            "udpin" => Ok(Self::UdpIn(host_port(rest, s)?)),
+            "tcpout" | "tcp" => Ok(Self::TcpOut(host_port(rest, s)?)),
+            "serial" => {
+                let (device, baud) = rest
+                    .rsplit_once(':')
+                    .ok_or_else(|| format!("`{s}`: expected serial:DEVICE:BAUD"))?;
+                if device.is_empty() {
+                    return Err(format!("`{s}`: empty serial device"));
+                }
+                let baud =
+                    baud.parse::<u32>().ok().filter(|b| *b > 0).ok_or_else(|| {
+                        format!("`{s}`: baud rate `{baud}` is not a positive number")
+                    })?;
+                Ok(Self::Serial {
+                    device: device.to_string(),
+                    baud,
+                })
+            }
+            other => Err(format!(
+                "`{s}`: unknown scheme `{other}` (use udpout, udpin, tcpout or serial)"
+            )),
+        }
+    }
+
+    /// Stream transports (TCP, serial) are rebuilt when they fail; UDP only
+    /// when its socket errors.
+    pub fn is_stream(&self) -> bool {
+        matches!(self, Self::TcpOut(_) | Self::Serial { .. })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn parses_every_form() {
+        assert_eq!(
+            Address::parse("udpout:127.0.0.1:14550"),
+            Ok(Address::UdpOut("127.0.0.1:14550".into()))
+        );
+        assert_eq!(
+            Address::parse("udpin:0.0.0.0:14551"),
+            Ok(Address::UdpIn("0.0.0.0:14551".into()))
+        );
+        assert_eq!(
+            Address::parse("tcpout:localhost:5760"),
+            Ok(Address::TcpOut("localhost:5760".into()))
+        );
+        assert_eq!(
+            Address::parse("serial:/dev/ttyACM0:921600"),
+            Ok(Address::Serial {
+                device: "/dev/ttyACM0".into(),
+                baud: 921600
+            })
+        );
+        assert_eq!(
+            Address::parse("serial:/dev/ttyACM0:57600").map(|a| a.to_string()),
+            Ok("serial:/dev/ttyACM0:57600".to_string())
+        );
+    }
+
+    #[test]
+    fn rejects_bad_addresses_with_a_reason() {
+        for bad in [
+            "",
+            "udpout",
+            "udpout:127.0.0.1",
+            "udpout:127.0.0.1:99999",
+            "udpout::14550",
+            "tcpin:127.0.0.1:5760",
+            "serial:/dev/ttyS0",
+            "serial:/dev/ttyS0:fast",
+            "serial::57600",
+            "serial:/dev/ttyS0:0",
+        ] {
+            let e = Address::parse(bad).unwrap_err();
+            assert!(e.contains('`'), "{bad}: {e}");
+        }
+    }
+}

@@ -1,0 +1,125 @@
+//! The bounded, drop-oldest queue of decoded messages for the MCAP log
+//! (`/mavlink/out`, `/mavlink/in`). The link never waits for the logger: when
+//! the consumer falls behind, the oldest events go and are counted.
+
+use serde::Serialize;
+use std::collections::VecDeque;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, Condvar, Mutex};
+use std::time::Duration;
+
+/// One MAVLink message sent or received, decoded.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct LinkEvent {
+    /// When it was written to / read from the transport, ns since the Unix epoch.
+    pub time_ns: u64,
+    /// Sent by us (`/mavlink/out`) or received (`/mavlink/in`).
+    pub outgoing: bool,
+    /// MAVLink message name, e.g. `LANDING_TARGET`.
+    pub name: String,
+    /// Capture time of the frame a pose message was built from.
+    pub capture_time_ns: Option<u64>,
+    /// The message's fields (plus `sysid`, `compid`, `seq` of the frame).
+    pub fields: serde_json::Value,
+}
+
+struct Queue {
+    events: Mutex<VecDeque<LinkEvent>>,
+    ready: Condvar,
+    capacity: usize,
+    dropped: AtomicU64,
+}
+
+fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
+    m.lock().unwrap_or_else(|p| p.into_inner())
+}
+
+/// The producing side, held by the link tasks.
+#[derive(Clone)]
+pub(crate) struct EventSender(Arc<Queue>);
+
+/// The consuming side, handed out by `LinkHandle::events()`. Meant for one
+/// consumer (the logger); clones share the same queue.
+#[derive(Clone)]
+pub struct EventReceiver(Arc<Queue>);
+
+/// A queue holding at most `capacity` (>= 1) events.
+pub(crate) fn event_queue(capacity: usize) -> (EventSender, EventReceiver) {
+    let q = Arc::new(Queue {
+        events: Mutex::new(VecDeque::with_capacity(capacity.clamp(1, 4096))),
+        ready: Condvar::new(),
+        capacity: capacity.max(1),
+        dropped: AtomicU64::new(0),
+    });
+    (EventSender(q.clone()), EventReceiver(q))
+}
+
+impl EventSender {
+    /// Queues `e`, dropping the oldest event when full. Never blocks for long.
+    pub fn push(&self, e: LinkEvent) {
+        let mut q = lock(&self.0.events);
+        if q.len() >= self.0.capacity {
+            q.pop_front();
+            self.0.dropped.fetch_add(1, Ordering::Relaxed);
+        }
+        q.push_back(e);
+        drop(q);
+        self.0.ready.notify_one();
+    }
+}
+
+impl EventReceiver {
+    /// The oldest queued event, if any, without waiting.
+    pub fn try_recv(&self) -> Option<LinkEvent> {
+        lock(&self.0.events).pop_front()
+    }
+
+    /// The oldest event, waiting up to `timeout` for one.
+    pub fn recv_timeout(&self, timeout: Duration) -> Option<LinkEvent> {
+        let q = lock(&self.0.events);
+        let (mut q, _) = self
+            .0
+            .ready
+            .wait_timeout_while(q, timeout, |q| q.is_empty())
+            .unwrap_or_else(|p| p.into_inner());
+        q.pop_front()
+    }
+
+    /// Everything queued now, oldest first.
+    pub fn drain(&self) -> Vec<LinkEvent> {
+        lock(&self.0.events).drain(..).collect()
+    }
+
+    /// Events dropped so far because this consumer was too slow.
+    pub fn dropped(&self) -> u64 {
+        self.0.dropped.load(Ordering::Relaxed)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn ev(i: u64) -> LinkEvent {
+        LinkEvent {
+            time_ns: i,
+            outgoing: true,
+            name: "X".into(),
+            capture_time_ns: None,
+            fields: serde_json::Value::Null,
+        }
+    }
+
+    #[test]
+    fn full_queue_drops_oldest_and_counts() {
+        let (tx, rx) = event_queue(3);
+        for i in 0..5 {
+            tx.push(ev(i));
+        }
+        let got: Vec<u64> = rx.drain().iter().map(|e| e.time_ns).collect();
+        assert_eq!(got, vec![2, 3, 4]);
+        assert_eq!(rx.dropped(), 2);
+        assert!(rx.try_recv().is_none());
+        assert!(rx.recv_timeout(Duration::from_millis(5)).is_none());
+    }
+}

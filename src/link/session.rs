@@ -1,0 +1,452 @@
+//! The link's two tasks: the pose task (measurements → pose messages) and the
+//! connection task (transport, reconnection, heartbeat, TIMESYNC, telemetry).
+
+use super::events::{EventSender, LinkEvent};
+use super::frame::{DecodeCounts, FrameDecoder, FrameEncoder, Incoming};
+use super::messages::{self, DroguePose};
+use super::stats::{Counters, bump};
+use super::telemetry::Telemetry;
+use super::transport::Transport;
+use super::{PoseMessage, Settings};
+use crate::measure::Measurement;
+use mavlink::dialects::ardupilotmega::{MavAutopilot, MavMessage};
+use mavlink::{Message, SigningConfig, SigningData};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
+use tokio::sync::{mpsc, watch};
+use tokio::time::{MissedTickBehavior, interval, sleep_until, timeout};
+
+/// What both tasks share.
+#[derive(Clone)]
+pub(crate) struct Context {
+    pub settings: Arc<Settings>,
+    pub counters: Arc<Counters>,
+    pub telemetry: Arc<Mutex<Telemetry>>,
+    pub events: EventSender,
+    pub stopped: Arc<AtomicBool>,
+}
+
+/// A pose message on its way to the connection task.
+pub(crate) struct Outgoing {
+    pub message: MavMessage,
+    pub capture_time_ns: u64,
+}
+
+/// Our clock: ns since the Unix epoch (the capture times' clock).
+pub(crate) fn unix_now_ns() -> u64 {
+    SystemTime::now()
+        .duration_since(UNIX_EPOCH)
+        .map_or(0, |d| u64::try_from(d.as_nanos()).unwrap_or(u64::MAX))
+}
+
+fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
+    m.lock().unwrap_or_else(|p| p.into_inner())
+}
+
+impl Context {
+    /// Older than `max_age_ms` at `now_ns`?
+    fn is_stale(&self, capture_time_ns: u64, now_ns: u64) -> bool {
+        let max_age_ms = self.settings.cfg.max_age_ms;
+        max_age_ms > 0 && now_ns.saturating_sub(capture_time_ns) > max_age_ms * 1_000_000
+    }
+}
+
+/// Builds the configured messages for one measurement; empty when nothing
+/// may be sent (no detection, degenerate values, no vehicle pose for NED).
+pub(crate) fn build_pose_messages(ctx: &Context, m: &Measurement, out: &mut Vec<MavMessage>) {
+    let Some(det) = m.detection.as_ref() else {
+        bump(&ctx.counters.no_detection, 1);
+        return;
+    };
+    let Some(pose) = DroguePose::new(det) else {
+        bump(&ctx.counters.invalid_measurement, 1);
+        return;
+    };
+    for kind in &ctx.settings.cfg.messages {
+        match kind {
+            PoseMessage::LandingTarget => out.push(messages::landing_target_body(m, &pose, det)),
+            PoseMessage::LandingTargetNed => {
+                let vehicle = lock(&ctx.telemetry).pose_at(m.capture_time_ns);
+                match vehicle.and_then(|v| messages::landing_target_ned(m, &pose, det, &v)) {
+                    Some(msg) => out.push(msg),
+                    None => bump(&ctx.counters.no_vehicle_pose, 1),
+                }
+            }
+            PoseMessage::VisionPositionEstimate => {
+                out.push(messages::vision_position_estimate(m, &pose, det))
+            }
+            PoseMessage::Odometry => out.push(messages::odometry(m, &pose, det)),
+        }
+    }
+}
+
+/// Takes the newest measurement, applies the rate limit and staleness, and
+/// queues its messages for the connection task.
+pub(crate) async fn pose_task(
+    ctx: Context,
+    mut latest: watch::Receiver<Option<Arc<Measurement>>>,
+    out: mpsc::Sender<Outgoing>,
+    mut shutdown: watch::Receiver<bool>,
+) {
+    let rate = ctx.settings.cfg.max_rate_hz;
+    let min_interval = (rate > 0.0).then(|| Duration::from_secs_f64(1.0 / rate));
+    let mut next_allowed: Option<tokio::time::Instant> = None;
+    let mut built = Vec::with_capacity(4);
+    loop {
+        tokio::select! {
+            changed = latest.changed() => if changed.is_err() { return },
+            _ = shutdown.changed() => return,
+        }
+        if let Some(at) = next_allowed
+            && tokio::time::Instant::now() < at
+        {
+            tokio::select! {
+                _ = sleep_until(at) => {}
+                _ = shutdown.changed() => return,
+            }
+        }
+        if ctx.stopped.load(Ordering::SeqCst) {
+            return;
+        }
+        let Some(m) = latest.borrow_and_update().clone() else {
+            continue;
+        };
+        bump(&ctx.counters.considered, 1);
+        if m.detection.is_some() && ctx.is_stale(m.capture_time_ns, unix_now_ns()) {
+            bump(&ctx.counters.stale, 1);
+            continue;
+        }
+        built.clear();
+        build_pose_messages(&ctx, &m, &mut built);
+        if built.is_empty() {
+            continue;
+        }
+        for message in built.drain(..) {
+            let o = Outgoing {
+                message,
+                capture_time_ns: m.capture_time_ns,
+            };
+            if out.try_send(o).is_err() {
+                bump(&ctx.counters.dropped_outgoing, 1);
+            }
+        }
+        next_allowed = min_interval.map(|d| tokio::time::Instant::now() + d);
+    }
+}
+
+/// Why a connection ended.
+enum End {
+    Shutdown,
+    Fault(String),
+}
+
+/// Owns the transport for the life of the link: opens it, runs it, and
+/// reopens it with back-off after any fault.
+pub(crate) async fn connection_task(
+    ctx: Context,
+    mut out: mpsc::Receiver<Outgoing>,
+    mut shutdown: watch::Receiver<bool>,
+) {
+    let cfg = &ctx.settings.cfg;
+    let address = ctx.settings.address.clone();
+    let signing = ctx.settings.signing_key.map(|key| {
+        SigningData::from_config(SigningConfig::new(
+            key,
+            cfg.signing_link_id,
+            true,
+            !cfg.signing_require,
+        ))
+    });
+    let mut conn = Connection {
+        ctx: ctx.clone(),
+        encoder: FrameEncoder::new(cfg.system_id, cfg.component_id),
+        signing,
+        heartbeat_lost: false,
+    };
+    let min_backoff = Duration::from_millis(cfg.reconnect_min_ms);
+    let max_backoff = Duration::from_millis(cfg.reconnect_max_ms);
+    let mut backoff = min_backoff;
+    let mut opened_before = false;
+    let mut failures_in_a_row = 0u64;
+    loop {
+        if ctx.stopped.load(Ordering::SeqCst) {
+            return;
+        }
+        match Transport::open(&address).await {
+            Ok(transport) => {
+                if opened_before {
+                    bump(&ctx.counters.reconnects, 1);
+                    tracing::warn!(%address, "mavlink link reconnected");
+                } else {
+                    tracing::info!(%address, "mavlink link open");
+                }
+                opened_before = true;
+                failures_in_a_row = 0;
+                backoff = min_backoff;
+                ctx.counters.connected.store(true, Ordering::Relaxed);
+                let end = conn.run(transport, &mut out, &mut shutdown).await;
+                ctx.counters.connected.store(false, Ordering::Relaxed);
+                match end {
+                    End::Shutdown => return,
+                    End::Fault(why) => {
+                        bump(&ctx.counters.io_errors, 1);
+                        tracing::warn!(%address, "mavlink link lost: {why}; reopening");
+                    }
+                }
+            }
+            Err(e) => {
+                bump(&ctx.counters.io_errors, 1);
+                failures_in_a_row += 1;
+                // Log the first failure and then every 10th, not every retry.
+                if failures_in_a_row % 10 == 1 {
+                    tracing::warn!(%address, attempts = failures_in_a_row, "cannot open mavlink link: {e}");
+                }
+            }
+        }
+        // Wait, dropping what the pose task queues meanwhile: nothing stale
+        // may go out once the link is back.
+        let wake = tokio::time::Instant::now() + backoff;
+        loop {
+            tokio::select! {
+                _ = sleep_until(wake) => break,
+                _ = shutdown.changed() => return,
+                o = out.recv() => match o {
+                    Some(_) => bump(&ctx.counters.dropped_outgoing, 1),
+                    None => return,
+                },
+            }
+        }
+        backoff = (backoff * 2).min(max_backoff);
+    }
+}
+
+struct Connection {
+    ctx: Context,
+    encoder: FrameEncoder,
+    signing: Option<SigningData>,
+    heartbeat_lost: bool,
+}
+
+impl Connection {
+    async fn run(
+        &mut self,
+        mut transport: Transport,
+        out: &mut mpsc::Receiver<Outgoing>,
+        shutdown: &mut watch::Receiver<bool>,
+    ) -> End {
+        let cfg = self.ctx.settings.cfg.clone();
+        let mut heartbeat = interval(Duration::from_millis(cfg.heartbeat_interval_ms));
+        heartbeat.set_missed_tick_behavior(MissedTickBehavior::Skip);
+        let mut timesync = interval(Duration::from_millis(cfg.timesync_interval_ms.max(1)));
+        timesync.set_missed_tick_behavior(MissedTickBehavior::Skip);
+        let mut watchdog = interval(Duration::from_millis(100));
+        watchdog.set_missed_tick_behavior(MissedTickBehavior::Skip);
+        let heartbeat_timeout = Duration::from_millis(cfg.heartbeat_timeout_ms);
+        let opened_at = Instant::now();
+        let datagram = transport.is_datagram();
+        let is_serial = matches!(transport, Transport::Serial(_));
+        let mut decoder = FrameDecoder::new();
+        let mut incoming = Vec::new();
+        let mut buf = vec![0u8; 4096];
+        loop {
+            tokio::select! {
+                biased;
+                _ = shutdown.changed() => return End::Shutdown,
+                r = transport.read(&mut buf) => match r {
+                    Ok(0) if !datagram => return End::Fault("peer closed the connection".into()),
+                    Ok(n) => {
+                        let mut counts = DecodeCounts::default();
+                        decoder.feed(&buf[..n], datagram, self.signing.as_ref(), &mut counts, &mut incoming);
+                        self.count(&counts);
+                        for msg in incoming.drain(..) {
+                            if let Err(e) = self.handle(&mut transport, msg).await {
+                                return e;
+                            }
+                        }
+                    }
+                    // A UDP error (e.g. ICMP unreachable) is not fatal: keep the socket.
+                    Err(e) if datagram => {
+                        bump(&self.ctx.counters.io_errors, 1);
+                        tracing::debug!("mavlink udp receive: {e}");
+                    }
+                    Err(e) => return End::Fault(format!("read: {e}")),
+                },
+                o = out.recv() => match o {
+                    Some(o) => {
+                        if self.ctx.is_stale(o.capture_time_ns, unix_now_ns()) {
+                            bump(&self.ctx.counters.stale, 1);
+                            continue;
+                        }
+                        if let Err(e) = self.send(&mut transport, &o.message, Some(o.capture_time_ns)).await {
+                            return e;
+                        }
+                    }
+                    None => return End::Shutdown,
+                },
+                _ = heartbeat.tick() => {
+                    if let Err(e) = self.send(&mut transport, &messages::heartbeat(), None).await {
+                        return e;
+                    }
+                }
+                _ = timesync.tick(), if cfg.timesync_interval_ms > 0 => {
+                    let now = i64::try_from(unix_now_ns()).unwrap_or(i64::MAX);
+                    lock(&self.ctx.telemetry).timesync.request_sent(now);
+                    if let Err(e) = self.send(&mut transport, &messages::timesync_request(now), None).await {
+                        return e;
+                    }
+                }
+                _ = watchdog.tick() => {
+                    let last = self.ctx.counters.last_heartbeat();
+                    let lost = last.is_some_and(|t| t.elapsed() > heartbeat_timeout);
+                    if lost && !self.heartbeat_lost {
+                        self.heartbeat_lost = true;
+                        bump(&self.ctx.counters.heartbeat_losses, 1);
+                        tracing::warn!("autopilot heartbeat lost (none for {} ms)", cfg.heartbeat_timeout_ms);
+                    }
+                    // A serial port may hang without an error (a USB adapter
+                    // half gone): once the autopilot spoke on this port and
+                    // then fell silent, rebuild the port.
+                    if lost && is_serial && last.is_some_and(|t| t > opened_at) {
+                        return End::Fault("autopilot heartbeat lost on the serial port".into());
+                    }
+                }
+            }
+        }
+    }
+
+    fn count(&self, c: &DecodeCounts) {
+        let k = &self.ctx.counters;
+        bump(&k.received, c.accepted);
+        bump(&k.bad_bytes, c.bad_bytes);
+        bump(&k.rejected_mavlink1, c.mavlink1);
+        bump(&k.rejected_signature, c.bad_signature);
+        bump(&k.rejected_payload, c.bad_payload);
+    }
+
+    /// Encodes, signs and writes one message; logs it as an event.
+    async fn send(
+        &mut self,
+        transport: &mut Transport,
+        message: &MavMessage,
+        capture_time_ns: Option<u64>,
+    ) -> Result<(), End> {
+        if self.ctx.stopped.load(Ordering::SeqCst) {
+            return Err(End::Shutdown);
+        }
+        let raw = self.encoder.encode(message, self.signing.as_ref());
+        let limit = Duration::from_millis(self.ctx.settings.cfg.write_timeout_ms);
+        let datagram = transport.is_datagram();
+        match timeout(limit, transport.write(raw.raw_bytes())).await {
+            Ok(Ok(true)) => {
+                self.ctx.counters.count_sent(message.message_name());
+                self.ctx.events.push(LinkEvent {
+                    time_ns: unix_now_ns(),
+                    outgoing: true,
+                    name: message.message_name().to_string(),
+                    capture_time_ns,
+                    fields: messages::fields_json(message),
+                });
+                Ok(())
+            }
+            Ok(Ok(false)) => {
+                bump(&self.ctx.counters.dropped_outgoing, 1);
+                Ok(())
+            }
+            Ok(Err(e)) if datagram => {
+                // Nobody listening, or the network is down: UDP keeps going.
+                bump(&self.ctx.counters.dropped_outgoing, 1);
+                bump(&self.ctx.counters.io_errors, 1);
+                tracing::debug!("mavlink udp send: {e}");
+                Ok(())
+            }
+            Ok(Err(e)) => {
+                bump(&self.ctx.counters.dropped_outgoing, 1);
+                Err(End::Fault(format!("write: {e}")))
+            }
+            Err(_) => {
+                bump(&self.ctx.counters.dropped_outgoing, 1);
+                if datagram {
+                    Ok(())
+                } else {
+                    Err(End::Fault(format!("write blocked for more than {limit:?}")))
+                }
+            }
+        }
+    }
+
+    /// Reacts to one accepted message from the link.
+    async fn handle(&mut self, transport: &mut Transport, m: Incoming) -> Result<(), End> {
+        let cfg = &self.ctx.settings.cfg;
+        let now_ns = unix_now_ns();
+        let from_system = m.header.system_id;
+        let from_component = m.header.component_id;
+        // Our own frames echoed back by a router: not the autopilot.
+        if from_system == u32::from(cfg.system_id) && from_component == cfg.component_id {
+            return Ok(());
+        }
+        let mut fields = messages::fields_json(&m.message);
+        if let Some(obj) = fields.as_object_mut() {
+            obj.insert("sysid".into(), from_system.into());
+            obj.insert("compid".into(), from_component.into());
+            obj.insert("seq".into(), m.header.sequence.into());
+            obj.insert("signed".into(), m.signed.into());
+        }
+        self.ctx.events.push(LinkEvent {
+            time_ns: now_ns,
+            outgoing: false,
+            name: m.message.message_name().to_string(),
+            capture_time_ns: None,
+            fields,
+        });
+        let from_autopilot = from_system == u32::from(cfg.system_id);
+        match &m.message {
+            MavMessage::HEARTBEAT(h)
+                if from_autopilot && h.autopilot != MavAutopilot::MAV_AUTOPILOT_INVALID =>
+            {
+                self.ctx.counters.heartbeat_seen(Instant::now());
+                if self.heartbeat_lost {
+                    self.heartbeat_lost = false;
+                    tracing::info!("autopilot heartbeat back");
+                }
+            }
+            MavMessage::ATTITUDE(a) if from_autopilot => {
+                lock(&self.ctx.telemetry).push_attitude(
+                    a.time_boot_ms,
+                    [a.roll, a.pitch, a.yaw],
+                    now_ns,
+                );
+            }
+            MavMessage::LOCAL_POSITION_NED(p) if from_autopilot => {
+                lock(&self.ctx.telemetry).push_position(p.time_boot_ms, [p.x, p.y, p.z], now_ns);
+            }
+            MavMessage::TIMESYNC(t) => {
+                let now = i64::try_from(now_ns).unwrap_or(i64::MAX);
+                if t.tc1 == 0 {
+                    // A request: answer at once, then learn from it.
+                    let reply = messages::timesync_reply(
+                        now,
+                        t.ts1,
+                        u8::try_from(from_system).unwrap_or(0),
+                        from_component,
+                    );
+                    self.send(transport, &reply, None).await?;
+                    if from_autopilot {
+                        lock(&self.ctx.telemetry).timesync.request_seen(t.ts1, now);
+                    }
+                } else if from_autopilot {
+                    let mut tm = lock(&self.ctx.telemetry);
+                    tm.timesync.reply(t.tc1, t.ts1, now);
+                    if let Some(off) = tm.timesync.offset_ns() {
+                        self.ctx
+                            .counters
+                            .timesync_offset_ns
+                            .store(off, Ordering::Relaxed);
+                    }
+                }
+            }
+            _ => {}
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,109 @@
+//! The byte transports under the link: UDP (out/in), TCP client, serial.
+
+use super::address::Address;
+use std::io;
+use std::net::SocketAddr;
+use tokio::io::{AsyncReadExt, AsyncWriteExt};
+use tokio::net::{TcpStream, UdpSocket};
+use tokio_serial::SerialPortBuilderExt;
+
+pub(crate) enum Transport {
+    Udp {
+        socket: UdpSocket,
+        /// Where to send; for `udpin`, whoever sent last.
+        peer: Option<SocketAddr>,
+        /// `udpin`: follow the sender of the last datagram.
+        follow_sender: bool,
+    },
+    Tcp(TcpStream),
+    Serial(tokio_serial::SerialStream),
+}
+
+async fn resolve(host_port: &str) -> io::Result<SocketAddr> {
+    tokio::net::lookup_host(host_port)
+        .await?
+        .next()
+        .ok_or_else(|| {
+            io::Error::new(
+                io::ErrorKind::AddrNotAvailable,
+                format!("{host_port}: no address"),
+            )
+        })
+}
+
+impl Transport {
+    pub async fn open(address: &Address) -> io::Result<Self> {
+        match address {
+            Address::UdpOut(hp) => {
+                let dest = resolve(hp).await?;
+                let bind: SocketAddr = if dest.is_ipv4() {
+                    ([0, 0, 0, 0], 0).into()
+                } else {
+                    (std::net::Ipv6Addr::UNSPECIFIED, 0).into()
+                };
+                Ok(Self::Udp {
+                    socket: UdpSocket::bind(bind).await?,
+                    peer: Some(dest),
+                    follow_sender: false,
+                })
+            }
+            Address::UdpIn(hp) => Ok(Self::Udp {
+                socket: UdpSocket::bind(resolve(hp).await?).await?,
+                peer: None,
+                follow_sender: true,
+            }),
+            Address::TcpOut(hp) => {
+                let s = TcpStream::connect(resolve(hp).await?).await?;
+                s.set_nodelay(true)?;
+                Ok(Self::Tcp(s))
+            }
+            Address::Serial { device, baud } => {
+                let port = tokio_serial::new(device, *baud)
+                    .data_bits(tokio_serial::DataBits::Eight)
+                    .parity(tokio_serial::Parity::None)
+                    .stop_bits(tokio_serial::StopBits::One)
+                    .flow_control(tokio_serial::FlowControl::None)
+                    .open_native_async()
+                    .map_err(io::Error::from)?;
+                Ok(Self::Serial(port))
+            }
+        }
+    }
+
+    /// Datagram transports deliver whole frames per read.
+    pub fn is_datagram(&self) -> bool {
+        matches!(self, Self::Udp { .. })
+    }
+
+    /// Reads what is available. `Ok(0)` on a stream: the peer hung up.
+    pub async fn read(&mut self, buf: &mut [u8]) -> io::Result<usize> {
+        match self {
+            Self::Udp {
+                socket,
+                peer,
+                follow_sender,
+            } => {
+                let (n, from) = socket.recv_from(buf).await?;
+                if *follow_sender {
+                    *peer = Some(from);
+                }
+                Ok(n)
+            }
+            Self::Tcp(s) => s.read(buf).await,
+            Self::Serial(s) => s.read(buf).await,
+        }
+    }
+
+    /// Writes one frame. `Ok(false)`: nowhere to send yet (`udpin` before the
+    /// peer spoke).
+    pub async fn write(&mut self, bytes: &[u8]) -> io::Result<bool> {
+        match self {
+            Self::Udp { socket, peer, .. } => match peer {
+                Some(p) => socket.send_to(bytes, *p).await.map(|_| true),
+                None => Ok(false),
+            },
+            Self::Tcp(s) => s.write_all(bytes).await.map(|_| true),
+            Self::Serial(s) => s.write_all(bytes).await.map(|_| true),
+        }
+    }
+}
