@@ -13,6 +13,7 @@
 mod layer;
 pub mod recover;
 pub mod replay;
+pub mod review;
 
 pub mod storage;
 pub mod topics;
