@@ -64,6 +64,8 @@ fn review_counts_rates_latencies_link_and_errors_by_range() {
     assert_eq!(r.cut, None);
     assert_eq!((r.frames, r.measurements, r.detected), (n, n, detected));
     assert_eq!(r.frames_lost, 1);
+    let span_s = (s::time_ns(FRAMES - 1) - s::time_ns(0)) as f64 * 1e-9;
+    assert!((r.duration_s() - span_s).abs() < 1e-9);
     assert!((r.detection_rate() - detected as f64 / n as f64).abs() < 1e-12);
 
     // Latency and processing percentiles against the values written.

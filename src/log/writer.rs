@@ -20,6 +20,8 @@ use std::time::{Duration, Instant};
 /// Record overhead per message (opcode, length, header, index entry): for
 /// the size estimate that drives rotation.
 const MESSAGE_OVERHEAD_BYTES: u64 = 40;
+/// Reports kept for `/log` while no file is open (the first ones matter).
+const MAX_PENDING_REPORTS: usize = 20;
 
 thread_local! {
     /// Set on the writer thread: its own tracing events must not come back
@@ -52,6 +54,8 @@ pub(crate) struct Writer {
     retry_at: Option<Instant>,
     summary: LogSummary,
     buf: Vec<u8>,
+    /// Reports made while no file was open, for `/log` of the next file.
+    pending_reports: Vec<LogEvent>,
 }
 
 impl Writer {
@@ -79,6 +83,7 @@ impl Writer {
                 ..Default::default()
             },
             buf: Vec::with_capacity(2 << 20),
+            pending_reports: Vec::new(),
         }
     }
 
@@ -92,13 +97,20 @@ impl Writer {
 
     fn open(&mut self, path: &std::path::Path) -> Result<OpenFile, String> {
         let StorageFile { writer, sync } = self.storage.create(path).map_err(|e| e.to_string())?;
-        self.next_part += 1;
         let options = mcap::WriteOptions::new()
             .compression(None)
             .profile("")
             .library(concat!("drogue-vision ", env!("CARGO_PKG_VERSION")))
             .chunk_size(Some(self.cfg.chunk_size_kib.saturating_mul(1024)));
-        let mcap = mcap::Writer::with_options(writer, options).map_err(|e| e.to_string())?;
+        let mcap = match mcap::Writer::with_options(writer, options) {
+            Ok(m) => m,
+            Err(e) => {
+                // Not even the header fits: leave no empty file behind.
+                let _ = self.storage.remove(path);
+                return Err(e.to_string());
+            }
+        };
+        self.next_part += 1;
         self.summary.files.push(path.to_path_buf());
         Ok(OpenFile {
             path: path.to_path_buf(),
@@ -324,7 +336,11 @@ impl Writer {
             Ok(f) => {
                 self.file = Some(f);
                 self.retry_at = None;
-                true
+                // What went wrong while no file was open goes to /log now.
+                for event in std::mem::take(&mut self.pending_reports) {
+                    self.write_log_event(&event);
+                }
+                self.file.is_some()
             }
             Err(e) => {
                 // The part number is not used up by a failed open.
@@ -363,16 +379,18 @@ impl Writer {
             Level::Warning => tracing::warn!(target: "drogue_vision::log", "{message}"),
             _ => tracing::info!(target: "drogue_vision::log", "{message}"),
         }
+        let event = LogEvent {
+            time_ns: storage::now_ns(),
+            level,
+            message,
+            name: "drogue_vision::log".into(),
+            file: file!().into(),
+            line: line!(),
+        };
         if self.file.is_some() {
-            let event = LogEvent {
-                time_ns: storage::now_ns(),
-                level,
-                message,
-                name: "drogue_vision::log".into(),
-                file: file!().into(),
-                line: line!(),
-            };
             self.write_log_event(&event);
+        } else if self.pending_reports.len() < MAX_PENDING_REPORTS {
+            self.pending_reports.push(event);
         }
     }
 

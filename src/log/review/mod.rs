@@ -74,8 +74,12 @@ pub struct ReviewReport {
     pub log: PathBuf,
     /// Why reading stopped early (a cut-short log), if it did.
     pub cut: Option<String>,
+    /// Log time span of all messages, ns.
     pub first_ns: Option<u64>,
     pub last_ns: Option<u64>,
+    /// Capture times of the first and last frame, ns.
+    pub first_frame_ns: Option<u64>,
+    pub last_frame_ns: Option<u64>,
     pub frames: u64,
     /// Frames missing from `/camera/image` (gaps in the sequence numbers).
     pub frames_lost: u64,
@@ -174,6 +178,8 @@ pub fn review(log: &Path, out_dir: &Path) -> Result<ReviewReport, LogError> {
             topics::IMAGE => {
                 r.frames += 1;
                 first_frame_ns.get_or_insert(t);
+                r.first_frame_ns = first_frame_ns;
+                r.last_frame_ns = Some(t);
                 if let Some(prev) = last_frame_seq
                     && m.sequence > prev
                 {
@@ -325,9 +331,15 @@ pub fn review(log: &Path, out_dir: &Path) -> Result<ReviewReport, LogError> {
 }
 
 impl ReviewReport {
+    /// First to last frame (all messages when the log has no frames), s.
     pub fn duration_s(&self) -> f64 {
-        match (self.first_ns, self.last_ns) {
-            (Some(a), Some(b)) => (b - a) as f64 * 1e-9,
+        let span = if self.frames > 0 {
+            (self.first_frame_ns, self.last_frame_ns)
+        } else {
+            (self.first_ns, self.last_ns)
+        };
+        match span {
+            (Some(a), Some(b)) => b.saturating_sub(a) as f64 * 1e-9,
             _ => 0.0,
         }
     }
