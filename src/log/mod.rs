@@ -133,6 +133,22 @@ impl LogError {
     }
 }
 
+/// An error with its causes ("I/O error: No space left on device"): the
+/// `mcap` crate's errors hide the io::Error in `source()`.
+pub(crate) fn error_chain(e: &dyn std::error::Error) -> String {
+    let mut text = e.to_string();
+    let mut cause = e.source();
+    while let Some(c) = cause {
+        let c_text = c.to_string();
+        if !text.contains(&c_text) {
+            text.push_str(": ");
+            text.push_str(&c_text);
+        }
+        cause = c.source();
+    }
+    text
+}
+
 /// What a finished log wrote.
 #[derive(Clone, Debug, Default, PartialEq, Serialize)]
 pub struct LogSummary {

@@ -96,7 +96,10 @@ impl Writer {
     }
 
     fn open(&mut self, path: &std::path::Path) -> Result<OpenFile, String> {
-        let StorageFile { writer, sync } = self.storage.create(path).map_err(|e| e.to_string())?;
+        let StorageFile { writer, sync } = self
+            .storage
+            .create(path)
+            .map_err(|e| super::error_chain(&e))?;
         let options = mcap::WriteOptions::new()
             .compression(None)
             .profile("")
@@ -107,7 +110,7 @@ impl Writer {
             Err(e) => {
                 // Not even the header fits: leave no empty file behind.
                 let _ = self.storage.remove(path);
-                return Err(e.to_string());
+                return Err(super::error_chain(&e));
             }
         };
         self.next_part += 1;
@@ -285,11 +288,11 @@ impl Writer {
                     let schema_id = file
                         .mcap
                         .add_schema(&schema.name, &schema.encoding, &schema.data)
-                        .map_err(|e| e.to_string())?;
+                        .map_err(|e| super::error_chain(&e))?;
                     let id = file
                         .mcap
                         .add_channel(schema_id, topic, message_encoding, &Default::default())
-                        .map_err(|e| e.to_string())?;
+                        .map_err(|e| super::error_chain(&e))?;
                     file.channels.insert(topic, id);
                     id
                 }
@@ -304,7 +307,7 @@ impl Writer {
             };
             file.mcap
                 .write_to_known_channel(&header, data)
-                .map_err(|e| e.to_string())
+                .map_err(|e| super::error_chain(&e))
         })();
         match result {
             Ok(()) => {
@@ -405,8 +408,8 @@ impl Writer {
         let result = file
             .mcap
             .flush()
-            .map_err(|e| e.to_string())
-            .and_then(|()| (file.sync)().map_err(|e| e.to_string()));
+            .map_err(|e| super::error_chain(&e))
+            .and_then(|()| (file.sync)().map_err(|e| super::error_chain(&e)));
         match result {
             Ok(()) => file.dirty = false,
             Err(e) => {
@@ -459,12 +462,15 @@ impl Writer {
             mut sync,
             ..
         } = file;
-        let result = mcap.finish().map(|_| ()).map_err(|e| e.to_string());
+        let result = mcap
+            .finish()
+            .map(|_| ())
+            .map_err(|e| super::error_chain(&e));
         // finish() leaves the footer in the write buffer: flush, then sync.
         let mut inner = mcap.into_inner();
         let result = result
-            .and_then(|()| inner.flush().map_err(|e| e.to_string()))
-            .and_then(|()| sync().map_err(|e| e.to_string()));
+            .and_then(|()| inner.flush().map_err(|e| super::error_chain(&e)))
+            .and_then(|()| sync().map_err(|e| super::error_chain(&e)));
         if let Err(e) = result {
             self.fail(format!("closing {}: {e}", path.display()));
         }
