@@ -19,6 +19,10 @@ struct Cli {
 enum Command {
     /// Offline measurement of a folder of images or an MCAP log, to JSON lines.
     Process(commands::process::ProcessArgs),
+    /// Post-flight review of an MCAP log: summary, poses.csv and plots.
+    Review(commands::review::ReviewArgs),
+    /// Rewrite a cut-short MCAP log into a complete, indexed one.
+    Recover(commands::recover::RecoverArgs),
 }
 
 fn init_tracing() {
@@ -28,6 +32,17 @@ fn init_tracing() {
         .with_env_filter(filter)
         .with_writer(std::io::stderr)
         .init();
+}
+
+/// Exit 2 when the input is unusable, 1 when the output could not be written.
+fn log_error_exit(e: drogue_vision::log::LogError) -> ExitCode {
+    eprintln!("error: {e}");
+    match e {
+        drogue_vision::log::LogError::Format { .. } | drogue_vision::log::LogError::Config(_) => {
+            ExitCode::from(2)
+        }
+        _ => ExitCode::from(1),
+    }
 }
 
 fn main() -> ExitCode {
@@ -50,6 +65,27 @@ fn main() -> ExitCode {
                 eprintln!("error: {e}");
                 ExitCode::from(2)
             }
+        },
+        Command::Review(args) => match commands::review::run(&args) {
+            Ok(report) => {
+                print!("{report}");
+                ExitCode::SUCCESS
+            }
+            Err(e) => log_error_exit(e),
+        },
+        Command::Recover(args) => match commands::recover::run(&args) {
+            Ok((out, r)) => {
+                eprintln!(
+                    "wrote {}: {} messages{}",
+                    out.display(),
+                    r.messages,
+                    r.cut
+                        .map(|c| format!(" (the input was cut short: {c})"))
+                        .unwrap_or_else(|| " (the input was complete)".into())
+                );
+                ExitCode::SUCCESS
+            }
+            Err(e) => log_error_exit(e),
         },
     }
 }

@@ -279,3 +279,39 @@ fn a_sample_log_for_the_interop_check() {
     let files = write_log(&dir, &s::config());
     println!("{}", files[0].display());
 }
+
+#[test]
+fn rotation_by_duration_starts_a_new_numbered_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut cfg = s::config();
+    cfg.rotate_duration_s = 1;
+    let log = FlightLog::start(&cfg, dir.path(), &s::camera()).unwrap();
+    log.frame(Arc::new(s::frame(0, false)));
+    std::thread::sleep(std::time::Duration::from_millis(1300));
+    log.frame(Arc::new(s::frame(1, false)));
+    let summary = log.finish().unwrap();
+    assert_eq!(summary.files.len(), 2, "{:?}", summary.files);
+    for (i, f) in summary.files.iter().enumerate() {
+        assert!(drogue_vision::log::recover::is_complete(f).unwrap());
+        let seqs: Vec<u64> = replay::open(f).unwrap().map(|r| r.unwrap().seq).collect();
+        assert_eq!(seqs, vec![i as u64]);
+    }
+}
+
+#[test]
+fn bad_config_values_are_clear_errors() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut cfg = s::config();
+    cfg.sync_interval_ms = 5000;
+    let e = FlightLog::start(&cfg, dir.path(), &s::camera())
+        .err()
+        .unwrap();
+    assert!(e.to_string().contains("sync_interval_ms"), "{e}");
+    let mut cfg = s::config();
+    cfg.file_prefix = "../escape".into();
+    assert!(FlightLog::start(&cfg, dir.path(), &s::camera()).is_err());
+    // A log folder that cannot be created.
+    let file = dir.path().join("a_file");
+    std::fs::write(&file, b"x").unwrap();
+    assert!(FlightLog::start(&s::config(), &file.join("logs"), &s::camera()).is_err());
+}

@@ -1,3 +1,5 @@
 //! The subcommands of the `drogue-vision` binary, one module each.
 
 pub mod process;
+pub mod recover;
+pub mod review;

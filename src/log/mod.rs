@@ -13,6 +13,7 @@
 mod layer;
 pub mod recover;
 pub mod replay;
+pub mod review;
 
 pub mod storage;
 pub mod topics;
@@ -130,6 +131,22 @@ impl LogError {
             message: e.to_string(),
         }
     }
+}
+
+/// An error with its causes ("I/O error: No space left on device"): the
+/// `mcap` crate's errors hide the io::Error in `source()`.
+pub(crate) fn error_chain(e: &dyn std::error::Error) -> String {
+    let mut text = e.to_string();
+    let mut cause = e.source();
+    while let Some(c) = cause {
+        let c_text = c.to_string();
+        if !text.contains(&c_text) {
+            text.push_str(": ");
+            text.push_str(&c_text);
+        }
+        cause = c.source();
+    }
+    text
 }
 
 /// What a finished log wrote.

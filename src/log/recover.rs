@@ -70,7 +70,9 @@ pub fn recover(input: &Path, output: &Path) -> Result<RecoverReport, LogError> {
     for message in reader {
         match message {
             Ok(m) => {
-                writer.write(&m).map_err(|e| LogError::io(output, e))?;
+                writer
+                    .write(&m)
+                    .map_err(|e| LogError::io(output, super::error_chain(&e)))?;
                 report.messages += 1;
                 report.last_log_time_ns = Some(m.log_time);
             }
@@ -78,7 +80,7 @@ pub fn recover(input: &Path, output: &Path) -> Result<RecoverReport, LogError> {
                 if report.messages == 0 && matches!(e, mcap::McapError::BadMagic) {
                     return Err(LogError::format(input, e));
                 }
-                report.cut = Some(e.to_string());
+                report.cut = Some(super::error_chain(&e));
                 break;
             }
         }

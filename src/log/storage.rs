@@ -21,6 +21,10 @@ pub struct StorageFile {
 pub trait Storage: Send {
     /// Creates a new file at `path` (failing if it exists).
     fn create(&mut self, path: &Path) -> io::Result<StorageFile>;
+    /// Removes a file that could not even get its header (a full disk).
+    fn remove(&mut self, path: &Path) -> io::Result<()> {
+        std::fs::remove_file(path)
+    }
 }
 
 /// The real file system: buffered writes, `sync_data` on the same file.

@@ -20,6 +20,8 @@ use std::time::{Duration, Instant};
 /// Record overhead per message (opcode, length, header, index entry): for
 /// the size estimate that drives rotation.
 const MESSAGE_OVERHEAD_BYTES: u64 = 40;
+/// Reports kept for `/log` while no file is open (the first ones matter).
+const MAX_PENDING_REPORTS: usize = 20;
 
 thread_local! {
     /// Set on the writer thread: its own tracing events must not come back
@@ -52,6 +54,8 @@ pub(crate) struct Writer {
     retry_at: Option<Instant>,
     summary: LogSummary,
     buf: Vec<u8>,
+    /// Reports made while no file was open, for `/log` of the next file.
+    pending_reports: Vec<LogEvent>,
 }
 
 impl Writer {
@@ -79,6 +83,7 @@ impl Writer {
                 ..Default::default()
             },
             buf: Vec::with_capacity(2 << 20),
+            pending_reports: Vec::new(),
         }
     }
 
@@ -91,14 +96,24 @@ impl Writer {
     }
 
     fn open(&mut self, path: &std::path::Path) -> Result<OpenFile, String> {
-        let StorageFile { writer, sync } = self.storage.create(path).map_err(|e| e.to_string())?;
-        self.next_part += 1;
+        let StorageFile { writer, sync } = self
+            .storage
+            .create(path)
+            .map_err(|e| super::error_chain(&e))?;
         let options = mcap::WriteOptions::new()
             .compression(None)
             .profile("")
             .library(concat!("drogue-vision ", env!("CARGO_PKG_VERSION")))
             .chunk_size(Some(self.cfg.chunk_size_kib.saturating_mul(1024)));
-        let mcap = mcap::Writer::with_options(writer, options).map_err(|e| e.to_string())?;
+        let mcap = match mcap::Writer::with_options(writer, options) {
+            Ok(m) => m,
+            Err(e) => {
+                // Not even the header fits: leave no empty file behind.
+                let _ = self.storage.remove(path);
+                return Err(super::error_chain(&e));
+            }
+        };
+        self.next_part += 1;
         self.summary.files.push(path.to_path_buf());
         Ok(OpenFile {
             path: path.to_path_buf(),
@@ -273,11 +288,11 @@ impl Writer {
                     let schema_id = file
                         .mcap
                         .add_schema(&schema.name, &schema.encoding, &schema.data)
-                        .map_err(|e| e.to_string())?;
+                        .map_err(|e| super::error_chain(&e))?;
                     let id = file
                         .mcap
                         .add_channel(schema_id, topic, message_encoding, &Default::default())
-                        .map_err(|e| e.to_string())?;
+                        .map_err(|e| super::error_chain(&e))?;
                     file.channels.insert(topic, id);
                     id
                 }
@@ -292,7 +307,7 @@ impl Writer {
             };
             file.mcap
                 .write_to_known_channel(&header, data)
-                .map_err(|e| e.to_string())
+                .map_err(|e| super::error_chain(&e))
         })();
         match result {
             Ok(()) => {
@@ -324,7 +339,11 @@ impl Writer {
             Ok(f) => {
                 self.file = Some(f);
                 self.retry_at = None;
-                true
+                // What went wrong while no file was open goes to /log now.
+                for event in std::mem::take(&mut self.pending_reports) {
+                    self.write_log_event(&event);
+                }
+                self.file.is_some()
             }
             Err(e) => {
                 // The part number is not used up by a failed open.
@@ -363,16 +382,18 @@ impl Writer {
             Level::Warning => tracing::warn!(target: "drogue_vision::log", "{message}"),
             _ => tracing::info!(target: "drogue_vision::log", "{message}"),
         }
+        let event = LogEvent {
+            time_ns: storage::now_ns(),
+            level,
+            message,
+            name: "drogue_vision::log".into(),
+            file: file!().into(),
+            line: line!(),
+        };
         if self.file.is_some() {
-            let event = LogEvent {
-                time_ns: storage::now_ns(),
-                level,
-                message,
-                name: "drogue_vision::log".into(),
-                file: file!().into(),
-                line: line!(),
-            };
             self.write_log_event(&event);
+        } else if self.pending_reports.len() < MAX_PENDING_REPORTS {
+            self.pending_reports.push(event);
         }
     }
 
@@ -387,8 +408,8 @@ impl Writer {
         let result = file
             .mcap
             .flush()
-            .map_err(|e| e.to_string())
-            .and_then(|()| (file.sync)().map_err(|e| e.to_string()));
+            .map_err(|e| super::error_chain(&e))
+            .and_then(|()| (file.sync)().map_err(|e| super::error_chain(&e)));
         match result {
             Ok(()) => file.dirty = false,
             Err(e) => {
@@ -441,12 +462,15 @@ impl Writer {
             mut sync,
             ..
         } = file;
-        let result = mcap.finish().map(|_| ()).map_err(|e| e.to_string());
+        let result = mcap
+            .finish()
+            .map(|_| ())
+            .map_err(|e| super::error_chain(&e));
         // finish() leaves the footer in the write buffer: flush, then sync.
         let mut inner = mcap.into_inner();
         let result = result
-            .and_then(|()| inner.flush().map_err(|e| e.to_string()))
-            .and_then(|()| sync().map_err(|e| e.to_string()));
+            .and_then(|()| inner.flush().map_err(|e| super::error_chain(&e)))
+            .and_then(|()| sync().map_err(|e| super::error_chain(&e)));
         if let Err(e) = result {
             self.fail(format!("closing {}: {e}", path.display()));
         }

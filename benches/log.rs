@@ -1,0 +1,222 @@
+//! Flight log throughput: 1280x960 frames with everything derived from them
+//! (calibration, truth, annotations, detection JSON, pose, transforms) through
+//! the queue and the writer thread. Target: >= 120 frames/s on one core.
+//!
+//! `cargo bench --bench log -- --warm-up-time 1 --measurement-time 3`
+
+use criterion::{Criterion, Throughput, criterion_group, criterion_main};
+use drogue_sim::FrameTruth;
+use drogue_vision::camera::CameraModel;
+use drogue_vision::frame::{Frame, FrameOrigin};
+use drogue_vision::log::{
+    FileStorage, FlightLog, ImageEncoding, LogConfig, MountTransforms, Storage, StorageFile,
+};
+use drogue_vision::measure::ellipse::Ellipse;
+use drogue_vision::measure::{
+    CirclePose, Detection, Disambiguation, FitQuality, Measurement, StageTimes,
+};
+use drogue_vision::record::DetectionRecord;
+use nalgebra::{Matrix3, Vector3};
+use std::io::{self, Seek, SeekFrom, Write};
+use std::path::Path;
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+const BATCH: u64 = 30;
+
+/// Storage that keeps only the position: the writer's CPU cost alone.
+struct Discard;
+
+#[derive(Default)]
+struct Counting {
+    pos: u64,
+    len: u64,
+}
+
+impl Write for Counting {
+    fn write(&mut self, buf: &[u8]) -> io::Result<usize> {
+        self.pos += buf.len() as u64;
+        self.len = self.len.max(self.pos);
+        Ok(buf.len())
+    }
+    fn flush(&mut self) -> io::Result<()> {
+        Ok(())
+    }
+}
+
+impl Seek for Counting {
+    fn seek(&mut self, pos: SeekFrom) -> io::Result<u64> {
+        // Only the length matters; the mcap writer seeks to patch headers.
+        self.pos = match pos {
+            SeekFrom::Start(p) => p,
+            SeekFrom::End(d) => self.len.saturating_add_signed(d),
+            SeekFrom::Current(d) => self.pos.saturating_add_signed(d),
+        };
+        Ok(self.pos)
+    }
+}
+
+impl Storage for Discard {
+    fn create(&mut self, _: &Path) -> io::Result<StorageFile> {
+        Ok(StorageFile {
+            writer: Box::new(Counting::default()),
+            sync: Box::new(|| Ok(())),
+        })
+    }
+    fn remove(&mut self, _: &Path) -> io::Result<()> {
+        Ok(())
+    }
+}
+
+fn camera() -> CameraModel {
+    let k = Matrix3::new(1336.2, 0.0, 646.3, 0.0, 1335.4, 473.8, 0.0, 0.0, 1.0);
+    CameraModel::new("bench", 1280, 960, k, [0.0; 5]).unwrap()
+}
+
+fn inputs() -> Vec<(Arc<Frame>, Arc<Measurement>, serde_json::Value)> {
+    (0..BATCH)
+        .map(|seq| {
+            let mut s = seq.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1;
+            let image = image::GrayImage::from_fn(1280, 960, |_, _| {
+                s ^= s << 13;
+                s ^= s >> 7;
+                s ^= s << 17;
+                image::Luma([(s >> 24) as u8])
+            });
+            let centre = Vector3::new(0.1, -0.05, 10.0);
+            let normal = Vector3::new(0.05, 0.1, -1.0).normalize();
+            let truth = FrameTruth {
+                frame: format!("frame_{seq:06}.png"),
+                seq,
+                t: seq as f64 / 30.0,
+                expect: "detect".into(),
+                radius: 0.15,
+                position_camera: centre.into(),
+                normal_camera: normal.into(),
+                alt_position_camera: centre.into(),
+                alt_normal_camera: normal.into(),
+                ellipse: None,
+                range_m: centre.norm(),
+                tilt_deg: 5.0,
+                probe_rim_frac: 0.0,
+                hose_rim_frac: 0.0,
+                rim_fully_in_image: true,
+                position_body: centre.into(),
+                normal_body: normal.into(),
+                position_ned: [0.0; 3],
+                receiver_position_ned: [0.0; 3],
+                receiver_q_ned_body: [1.0, 0.0, 0.0, 0.0],
+            };
+            let t = 1_795_341_600_000_000_000 + seq * 33_333_333;
+            let frame = Frame {
+                seq,
+                capture_time_ns: t,
+                image,
+                origin: FrameOrigin::Sim(Box::new(truth)),
+            };
+            // A typical detection: ~300 rim points.
+            let n = 300;
+            let m = Measurement {
+                seq,
+                capture_time_ns: t,
+                detection: Some(Detection {
+                    ellipse_px: Ellipse::new(640.0, 480.0, 60.0, 50.0, 0.1),
+                    pose_camera: CirclePose {
+                        centre_camera_m: centre,
+                        normal_camera: normal,
+                    },
+                    alt_pose_camera: None,
+                    disambiguation: Disambiguation::CanopyRim,
+                    position_body_m: centre,
+                    normal_body: normal,
+                    position_from_probe_body_m: centre,
+                    position_cov_body_m2: Matrix3::identity() * 1e-4,
+                    normal_sigma_rad: 0.01,
+                    quality: FitQuality {
+                        points: n,
+                        inliers: n - 10,
+                        rms_residual_px: 0.3,
+                        score: 0.9,
+                    },
+                    track_epoch: 1,
+                    rim_points_px: (0..n)
+                        .map(|i| {
+                            let a = i as f32 * std::f32::consts::TAU / n as f32;
+                            [640.0 + 60.0 * a.cos(), 480.0 + 50.0 * a.sin()]
+                        })
+                        .collect(),
+                    inliers: (0..n).map(|i| i % 30 != 0).collect(),
+                }),
+                tracked: true,
+                times: StageTimes::default(),
+            };
+            let json = serde_json::to_value(DetectionRecord::from_measurement(seq.to_string(), &m))
+                .unwrap();
+            (Arc::new(frame), Arc::new(m), json)
+        })
+        .collect()
+}
+
+fn mount() -> MountTransforms {
+    MountTransforms {
+        camera_in_body_m: [1.5, 0.0, -0.2],
+        q_body_camera: [0.5, 0.5, 0.5, 0.5],
+        probe_in_body_m: [3.0, 0.4, -0.5],
+    }
+}
+
+/// Time to log BATCH frames, from the first push to the file closed.
+fn log_batch(
+    cfg: &LogConfig,
+    dir: &Path,
+    storage: Box<dyn Storage>,
+    inputs: &[(Arc<Frame>, Arc<Measurement>, serde_json::Value)],
+) -> Duration {
+    let start = Instant::now();
+    let log = FlightLog::start_with_storage(cfg, dir, &camera(), storage).unwrap();
+    for (f, m, j) in inputs {
+        log.frame(f.clone());
+        log.measurement_with_transforms(m.clone(), j.clone(), mount());
+    }
+    let summary = log.finish().unwrap();
+    let elapsed = start.elapsed();
+    assert_eq!(summary.frames, BATCH, "the queue dropped frames");
+    for f in &summary.files {
+        let _ = std::fs::remove_file(f);
+    }
+    elapsed
+}
+
+fn bench(c: &mut Criterion) {
+    let inputs = inputs();
+    let mut group = c.benchmark_group("log_1280x960");
+    group.throughput(Throughput::Elements(BATCH));
+    group.sample_size(10);
+    for encoding in [ImageEncoding::Raw, ImageEncoding::Png] {
+        let mut cfg = drogue_vision::config::Config::embedded().log;
+        cfg.image_encoding = encoding;
+        cfg.queue_len = 4 * BATCH as usize;
+        cfg.recover_on_start = false;
+        let name = format!("{encoding:?}").to_lowercase();
+        group.bench_function(format!("{name}_cpu_only"), |b| {
+            b.iter_custom(|iters| {
+                let dir = tempfile::tempdir().unwrap();
+                (0..iters)
+                    .map(|_| log_batch(&cfg, dir.path(), Box::new(Discard), &inputs))
+                    .sum()
+            })
+        });
+        group.bench_function(format!("{name}_to_disk"), |b| {
+            b.iter_custom(|iters| {
+                let dir = tempfile::tempdir_in(env!("CARGO_TARGET_TMPDIR")).unwrap();
+                (0..iters)
+                    .map(|_| log_batch(&cfg, dir.path(), Box::new(FileStorage), &inputs))
+                    .sum()
+            })
+        });
+    }
+    group.finish();
+}
+
+criterion_group!(benches, bench);
+criterion_main!(benches);

@@ -1,0 +1,442 @@
+//! Post-flight review of a log: a terminal summary, `poses.csv` and PNG plots.
+//! Streams the log once; memory stays bounded whatever its size (histograms,
+//! per-range sums, and a plot series thinned by halving when it grows).
+
+mod plots;
+mod stats;
+
+use super::recover::message_reader;
+use super::{LogError, topics};
+use foxglove::Decode;
+use foxglove::messages::Log;
+use serde::Deserialize;
+use std::collections::{BTreeMap, VecDeque};
+use std::fmt;
+use std::fs::File;
+use std::io::{BufWriter, Write};
+use std::path::{Path, PathBuf};
+
+pub use stats::{Histogram, RangeBin};
+
+/// Heartbeat gap that counts as the autopilot link lost, ns.
+const LINK_LOST_NS: u64 = 3_000_000_000;
+/// Plot points kept; above this the series is thinned by half.
+const MAX_PLOT_POINTS: usize = 50_000;
+/// `/log` messages at warning level or above quoted in the summary.
+const QUOTED_PROBLEMS: usize = 10;
+/// Truth records waiting for their detection (normally one).
+const MAX_PENDING_TRUTH: usize = 256;
+
+/// The fields of `/drogue/detection` the review reads.
+#[derive(Deserialize)]
+struct DetectionLite {
+    detected: bool,
+    position_camera: Option<[f64; 3]>,
+    normal_camera: Option<[f64; 3]>,
+    position_body: Option<[f64; 3]>,
+    times_us: Option<TimesLite>,
+    /// Capture to pose sent, when the caller stamped it.
+    latency_ms: Option<f64>,
+}
+
+#[derive(Deserialize)]
+struct TimesLite {
+    total_us: f64,
+}
+
+/// The fields of `/sim/truth` the review reads.
+#[derive(Deserialize, Clone, Copy)]
+struct TruthLite {
+    position_camera: [f64; 3],
+    normal_camera: [f64; 3],
+    range_m: f64,
+}
+
+#[derive(Deserialize)]
+struct LinkLite {
+    name: String,
+}
+
+/// One frame for the plots (NaN where there is no value).
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct PlotPoint {
+    pub t_s: f64,
+    pub detected: bool,
+    pub position_camera: [f64; 3],
+    pub truth_camera: [f64; 3],
+    pub range_m: f64,
+    pub position_error_m: f64,
+}
+
+/// Everything the review found.
+#[derive(Debug, Default)]
+pub struct ReviewReport {
+    pub log: PathBuf,
+    /// Why reading stopped early (a cut-short log), if it did.
+    pub cut: Option<String>,
+    /// Log time span of all messages, ns.
+    pub first_ns: Option<u64>,
+    pub last_ns: Option<u64>,
+    /// Capture times of the first and last frame, ns.
+    pub first_frame_ns: Option<u64>,
+    pub last_frame_ns: Option<u64>,
+    pub frames: u64,
+    /// Frames missing from `/camera/image` (gaps in the sequence numbers).
+    pub frames_lost: u64,
+    pub measurements: u64,
+    pub detected: u64,
+    /// Measurement time per frame, ms.
+    pub processing_ms: Histogram,
+    /// Capture to pose sent, ms (when the log has it).
+    pub latency_ms: Histogram,
+    pub mavlink_out: BTreeMap<String, u64>,
+    pub mavlink_in: BTreeMap<String, u64>,
+    pub heartbeats_in: u64,
+    /// Times the autopilot's heartbeat stopped for more than 3 s.
+    pub link_losses: u64,
+    pub longest_heartbeat_gap_s: f64,
+    pub warnings: u64,
+    pub errors: u64,
+    pub problems: Vec<String>,
+    /// Items the log writer reported dropped (queue full + write errors).
+    pub log_dropped: u64,
+    pub truth_frames: u64,
+    pub by_range: Vec<RangeBin>,
+    pub files_written: Vec<PathBuf>,
+    pub plot_error: Option<String>,
+    #[doc(hidden)]
+    pub(crate) series: Vec<PlotPoint>,
+}
+
+fn angle_deg(a: [f64; 3], b: [f64; 3]) -> f64 {
+    let dot = a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+    let na = (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]).sqrt();
+    let nb = (b[0] * b[0] + b[1] * b[1] + b[2] * b[2]).sqrt();
+    (dot / (na * nb)).clamp(-1.0, 1.0).acos().to_degrees()
+}
+
+fn distance(a: [f64; 3], b: [f64; 3]) -> f64 {
+    ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
+}
+
+fn csv_opt(v: Option<f64>) -> String {
+    v.map(|x| format!("{x}")).unwrap_or_default()
+}
+
+fn csv_xyz(v: Option<[f64; 3]>) -> String {
+    match v {
+        Some([x, y, z]) => format!("{x},{y},{z}"),
+        None => ",,".into(),
+    }
+}
+
+const CSV_HEADER: &str = "time_s,capture_time_ns,seq,detected,\
+position_camera_x_m,position_camera_y_m,position_camera_z_m,\
+normal_camera_x,normal_camera_y,normal_camera_z,\
+position_body_x_m,position_body_y_m,position_body_z_m,\
+processing_ms,latency_ms,\
+truth_position_camera_x_m,truth_position_camera_y_m,truth_position_camera_z_m,\
+truth_normal_camera_x,truth_normal_camera_y,truth_normal_camera_z,\
+truth_range_m,position_error_m,normal_error_deg";
+
+/// Reviews `log`, writing `poses.csv` and the plots into `out_dir`.
+pub fn review(log: &Path, out_dir: &Path) -> Result<ReviewReport, LogError> {
+    std::fs::create_dir_all(out_dir).map_err(|e| LogError::io(out_dir, e))?;
+    let csv_path = out_dir.join("poses.csv");
+    let csv_file = File::create(&csv_path).map_err(|e| LogError::io(&csv_path, e))?;
+    let mut csv = BufWriter::new(csv_file);
+    let csv_err = |e: std::io::Error| LogError::io(&csv_path, e);
+    writeln!(csv, "{CSV_HEADER}").map_err(csv_err)?;
+
+    let mut r = ReviewReport {
+        log: log.to_path_buf(),
+        by_range: stats::range_bins(),
+        ..Default::default()
+    };
+    let mut last_frame_seq: Option<u32> = None;
+    let mut last_heartbeat: Option<u64> = None;
+    let mut pending_truth: VecDeque<(u64, TruthLite)> = VecDeque::new();
+    let mut stride = 1usize;
+    let mut since_kept = 0usize;
+    let mut first_frame_ns: Option<u64> = None;
+
+    for message in message_reader(log)? {
+        let m = match message {
+            Ok(m) => m,
+            Err(e) => {
+                if r.first_ns.is_none() && matches!(e, mcap::McapError::BadMagic) {
+                    return Err(LogError::format(log, e));
+                }
+                r.cut = Some(e.to_string());
+                break;
+            }
+        };
+        let t = m.log_time;
+        r.first_ns = Some(r.first_ns.map_or(t, |f| f.min(t)));
+        r.last_ns = Some(r.last_ns.map_or(t, |l| l.max(t)));
+        match m.channel.topic.as_str() {
+            topics::IMAGE => {
+                r.frames += 1;
+                first_frame_ns.get_or_insert(t);
+                r.first_frame_ns = first_frame_ns;
+                r.last_frame_ns = Some(t);
+                if let Some(prev) = last_frame_seq
+                    && m.sequence > prev
+                {
+                    r.frames_lost += u64::from(m.sequence - prev - 1);
+                }
+                last_frame_seq = Some(m.sequence);
+            }
+            topics::SIM_TRUTH => {
+                if let Ok(truth) = serde_json::from_slice::<TruthLite>(&m.data) {
+                    pending_truth.push_back((t, truth));
+                    if pending_truth.len() > MAX_PENDING_TRUTH {
+                        pending_truth.pop_front();
+                    }
+                }
+            }
+            topics::DETECTION => {
+                let Ok(d) = serde_json::from_slice::<DetectionLite>(&m.data) else {
+                    r.problems
+                        .push(format!("unreadable /drogue/detection at {t} ns"));
+                    continue;
+                };
+                r.measurements += 1;
+                if d.detected {
+                    r.detected += 1;
+                }
+                let processing = d.times_us.as_ref().map(|x| x.total_us / 1000.0);
+                if let Some(p) = processing {
+                    r.processing_ms.add(p);
+                }
+                if let Some(l) = d.latency_ms {
+                    r.latency_ms.add(l);
+                }
+                // The truth of this frame has the same log time.
+                while pending_truth.front().is_some_and(|(tt, _)| *tt < t) {
+                    pending_truth.pop_front();
+                }
+                let truth = match pending_truth.front() {
+                    Some((tt, truth)) if *tt == t => Some(*truth),
+                    _ => None,
+                };
+                let mut pos_err = None;
+                let mut normal_err = None;
+                if let Some(truth) = truth {
+                    r.truth_frames += 1;
+                    if let (Some(p), Some(n)) = (d.position_camera, d.normal_camera) {
+                        let pe = distance(p, truth.position_camera);
+                        let ne = angle_deg(n, truth.normal_camera);
+                        pos_err = Some(pe);
+                        normal_err = Some(ne);
+                        stats::add_to_bins(&mut r.by_range, truth.range_m, Some((pe, ne)));
+                    } else {
+                        stats::add_to_bins(&mut r.by_range, truth.range_m, None);
+                    }
+                }
+                let time_s = t.saturating_sub(first_frame_ns.unwrap_or(t)) as f64 * 1e-9;
+                writeln!(
+                    csv,
+                    "{time_s:.6},{t},{},{},{},{},{},{},{},{},{},{},{},{}",
+                    m.sequence,
+                    u8::from(d.detected),
+                    csv_xyz(d.position_camera),
+                    csv_xyz(d.normal_camera),
+                    csv_xyz(d.position_body),
+                    csv_opt(processing),
+                    csv_opt(d.latency_ms),
+                    csv_xyz(truth.map(|x| x.position_camera)),
+                    csv_xyz(truth.map(|x| x.normal_camera)),
+                    csv_opt(truth.map(|x| x.range_m)),
+                    csv_opt(pos_err),
+                    csv_opt(normal_err),
+                )
+                .map_err(csv_err)?;
+
+                since_kept += 1;
+                if since_kept >= stride {
+                    since_kept = 0;
+                    r.series.push(PlotPoint {
+                        t_s: time_s,
+                        detected: d.detected,
+                        position_camera: d.position_camera.unwrap_or([f64::NAN; 3]),
+                        truth_camera: truth.map_or([f64::NAN; 3], |x| x.position_camera),
+                        range_m: truth.map_or(f64::NAN, |x| x.range_m),
+                        position_error_m: pos_err.unwrap_or(f64::NAN),
+                    });
+                    if r.series.len() >= MAX_PLOT_POINTS {
+                        let mut i = 0;
+                        r.series.retain(|_| {
+                            i += 1;
+                            i % 2 == 1
+                        });
+                        stride *= 2;
+                    }
+                }
+            }
+            topics::MAVLINK_OUT | topics::MAVLINK_IN => {
+                let Ok(l) = serde_json::from_slice::<LinkLite>(&m.data) else {
+                    continue;
+                };
+                let incoming = m.channel.topic == topics::MAVLINK_IN;
+                if incoming && l.name == "HEARTBEAT" {
+                    r.heartbeats_in += 1;
+                    if let Some(prev) = last_heartbeat {
+                        let gap = t.saturating_sub(prev);
+                        if gap > LINK_LOST_NS {
+                            r.link_losses += 1;
+                        }
+                        r.longest_heartbeat_gap_s =
+                            r.longest_heartbeat_gap_s.max(gap as f64 * 1e-9);
+                    }
+                    last_heartbeat = Some(t);
+                }
+                let counts = if incoming {
+                    &mut r.mavlink_in
+                } else {
+                    &mut r.mavlink_out
+                };
+                *counts.entry(l.name).or_insert(0) += 1;
+            }
+            topics::LOG => {
+                let Ok(l) = Log::decode(m.data.as_ref()) else {
+                    continue;
+                };
+                if let Some(n) = stats::dropped_in_report(&l.message) {
+                    r.log_dropped = r.log_dropped.max(n);
+                }
+                use foxglove::messages::log::Level;
+                let level = l.level;
+                if level >= Level::Warning as i32 {
+                    if level >= Level::Error as i32 {
+                        r.errors += 1;
+                    } else {
+                        r.warnings += 1;
+                    }
+                    if r.problems.len() < QUOTED_PROBLEMS {
+                        r.problems.push(format!("{}: {}", l.name, l.message));
+                    }
+                }
+            }
+            _ => {}
+        }
+    }
+    csv.flush().map_err(csv_err)?;
+    r.files_written.push(csv_path);
+    match plots::draw_all(&r, out_dir) {
+        Ok(files) => r.files_written.extend(files),
+        Err(e) => r.plot_error = Some(e),
+    }
+    Ok(r)
+}
+
+impl ReviewReport {
+    /// First to last frame (all messages when the log has no frames), s.
+    pub fn duration_s(&self) -> f64 {
+        let span = if self.frames > 0 {
+            (self.first_frame_ns, self.last_frame_ns)
+        } else {
+            (self.first_ns, self.last_ns)
+        };
+        match span {
+            (Some(a), Some(b)) => b.saturating_sub(a) as f64 * 1e-9,
+            _ => 0.0,
+        }
+    }
+    pub fn detection_rate(&self) -> f64 {
+        if self.measurements == 0 {
+            0.0
+        } else {
+            self.detected as f64 / self.measurements as f64
+        }
+    }
+}
+
+fn percentiles(h: &Histogram) -> String {
+    if h.count() == 0 {
+        return "none in the log".into();
+    }
+    format!(
+        "p50 {:.2}  p95 {:.2}  p99 {:.2}  max {:.2} ms ({} frames)",
+        h.quantile(0.50),
+        h.quantile(0.95),
+        h.quantile(0.99),
+        h.max(),
+        h.count()
+    )
+}
+
+impl fmt::Display for ReviewReport {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        writeln!(f, "log        {}", self.log.display())?;
+        if let Some(c) = &self.cut {
+            writeln!(
+                f,
+                "           CUT SHORT, read up to: {c} (drogue-vision recover fixes the file)"
+            )?;
+        }
+        writeln!(f, "duration   {:.1} s", self.duration_s())?;
+        writeln!(
+            f,
+            "frames     {} logged, {} lost or dropped before the log (sequence gaps), {} dropped by the log writer",
+            self.frames, self.frames_lost, self.log_dropped
+        )?;
+        writeln!(
+            f,
+            "detection  {} of {} frames ({:.1} %)",
+            self.detected,
+            self.measurements,
+            100.0 * self.detection_rate()
+        )?;
+        writeln!(f, "processing {}", percentiles(&self.processing_ms))?;
+        writeln!(f, "latency    {}", percentiles(&self.latency_ms))?;
+        let sent: u64 = self.mavlink_out.values().sum();
+        let sent_list: Vec<String> = self
+            .mavlink_out
+            .iter()
+            .map(|(k, v)| format!("{k} {v}"))
+            .collect();
+        writeln!(
+            f,
+            "sent       {sent} MAVLink messages ({})",
+            sent_list.join(", ")
+        )?;
+        writeln!(
+            f,
+            "link       {} autopilot heartbeats, lost {} times (> 3 s), longest gap {:.1} s, {} messages received",
+            self.heartbeats_in,
+            self.link_losses,
+            self.longest_heartbeat_gap_s,
+            self.mavlink_in.values().sum::<u64>()
+        )?;
+        writeln!(
+            f,
+            "problems   {} errors, {} warnings",
+            self.errors, self.warnings
+        )?;
+        for p in &self.problems {
+            writeln!(f, "           {p}")?;
+        }
+        if self.truth_frames > 0 {
+            writeln!(
+                f,
+                "against the simulator's truth ({} frames):",
+                self.truth_frames
+            )?;
+            writeln!(
+                f,
+                "  range m      frames  detected  pos err mean/rms/max m     normal err mean/max deg"
+            )?;
+            for b in self.by_range.iter().filter(|b| b.frames > 0) {
+                writeln!(f, "  {b}")?;
+            }
+        }
+        for p in &self.files_written {
+            writeln!(f, "wrote      {}", p.display())?;
+        }
+        if let Some(e) = &self.plot_error {
+            writeln!(f, "plots      not drawn: {e}")?;
+        }
+        Ok(())
+    }
+}
