@@ -25,7 +25,8 @@ pub struct TrackConfig {
     /// ...and the better one has at least this support (0..1).
     pub canopy_min_support: f64,
     /// Continuity settles it when one solution's normal is closer to the
-    /// tracked normal (extrapolated at constant angular velocity) than the other's by at least this, degrees.
+    /// tracked normal (extrapolated at constant angular velocity) than the
+    /// other's by at least this, degrees.
     pub continuity_margin_deg: f64,
 }
 
@@ -161,8 +162,8 @@ impl Tracker {
 
     /// Picks one of the two cone solutions and updates the track:
     /// the canopy rim when it decides, else continuity with a settled track,
-    /// else unresolved (the solution nearest the track's predicted normal, or the first,
-    /// with the other reported as `alternative`).
+    /// else unresolved (the solution nearest the track's predicted normal, or
+    /// the first, with the other reported as `alternative`).
     pub fn choose(
         &mut self,
         solutions: [CirclePose; 2],
