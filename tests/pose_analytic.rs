@@ -401,6 +401,37 @@ fn covariance_is_consistent_with_actual_errors() {
     }
 }
 
+#[test]
+fn uncertainty_is_unknown_without_enough_points() {
+    let cam = camera();
+    let e = Ellipse::new(600.0, 400.0, 80.0, 50.0, 0.3);
+    let pose = cone_pose(&e, &cam, 0.15).unwrap()[0];
+    let points: Vec<[f64; 2]> = (0..5).map(|k| e.point_at(k as f64)).collect();
+    let quality = FitQuality {
+        points: 5,
+        inliers: 5,
+        rms_residual_px: 0.0,
+        score: 1.0,
+    };
+    let u = pose_uncertainty(&e, &cam, &pose, 0.15, &quality, &points);
+    assert!(u.normal_sigma_rad.is_nan());
+    assert!(u.position_cov_camera_m2.iter().all(|x| x.is_nan()));
+    // Enough points: known, and larger for a noisier fit.
+    let points: Vec<[f64; 2]> = (0..100).map(|k| e.point_at(k as f64 * 0.0628)).collect();
+    let sigma = |rms: f64| {
+        let q = FitQuality {
+            points: 100,
+            inliers: 100,
+            rms_residual_px: rms,
+            score: 1.0,
+        };
+        pose_uncertainty(&e, &cam, &pose, 0.15, &q, &points)
+    };
+    let (low, high) = (sigma(0.1), sigma(0.4));
+    assert!(low.normal_sigma_rad > 0.0 && high.normal_sigma_rad > 3.0 * low.normal_sigma_rad);
+    assert!(high.position_cov_camera_m2.trace() > 9.0 * low.position_cov_camera_m2.trace());
+}
+
 /// A drogue approaching from 20 m to 3 m while its normal swings through the
 /// frontal view and back (tilt from +20 to -20 degrees about a slowly turning
 /// axis). The canopy rim is seen in the first frame only; continuity must
