@@ -145,7 +145,7 @@ fn inputs() -> Vec<(Arc<Frame>, Arc<Measurement>, serde_json::Value)> {
                             [640.0 + 60.0 * a.cos(), 480.0 + 50.0 * a.sin()]
                         })
                         .collect(),
-                    inliers: (0..n).map(|i| i % 30 != 0).collect(),
+                    inliers: (0..n).map(|i| !i.is_multiple_of(30)).collect(),
                 }),
                 tracked: true,
                 times: StageTimes::default(),

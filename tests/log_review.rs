@@ -60,7 +60,7 @@ fn review_counts_rates_latencies_link_and_errors_by_range() {
     println!("{r}");
 
     let n = logged_seqs().count() as u64;
-    let detected = logged_seqs().filter(|s| s % 5 != 0).count() as u64;
+    let detected = logged_seqs().filter(|s| !s.is_multiple_of(5)).count() as u64;
     assert_eq!(r.cut, None);
     assert_eq!((r.frames, r.measurements, r.detected), (n, n, detected));
     assert_eq!(r.frames_lost, 1);
@@ -97,7 +97,7 @@ fn review_counts_rates_latencies_link_and_errors_by_range() {
             .collect();
         let det: Vec<f64> = in_bin
             .iter()
-            .filter(|&&s| s % 5 != 0)
+            .filter(|&&s| !s.is_multiple_of(5))
             .map(|&s| s::error_m(s))
             .collect();
         assert_eq!(b.frames, in_bin.len() as u64, "bin {b}");

@@ -315,3 +315,22 @@ fn bad_config_values_are_clear_errors() {
     std::fs::write(&file, b"x").unwrap();
     assert!(FlightLog::start(&s::config(), &file.join("logs"), &s::camera()).is_err());
 }
+
+#[test]
+fn a_full_queue_drops_counts_and_reports_without_blocking_the_caller() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut cfg = s::config();
+    cfg.queue_len = 1;
+    let log = FlightLog::start(&cfg, dir.path(), &s::camera()).unwrap();
+    let frames: Vec<_> = (0..40).map(|seq| Arc::new(s::frame(seq, false))).collect();
+    for f in frames {
+        log.frame(f);
+    }
+    let summary = log.finish().unwrap();
+    assert!(summary.dropped_queue_full > 0, "{summary:?}");
+    assert_eq!(summary.frames + summary.dropped_queue_full, 40);
+    // The drop count is in /log, and review reads it back.
+    let r = drogue_vision::log::review::review(&summary.files[0], &dir.path().join("r")).unwrap();
+    assert_eq!(r.log_dropped, summary.dropped_queue_full);
+    assert_eq!(r.frames, summary.frames);
+}

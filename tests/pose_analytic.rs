@@ -401,6 +401,37 @@ fn covariance_is_consistent_with_actual_errors() {
     }
 }
 
+#[test]
+fn uncertainty_is_unknown_without_enough_points() {
+    let cam = camera();
+    let e = Ellipse::new(600.0, 400.0, 80.0, 50.0, 0.3);
+    let pose = cone_pose(&e, &cam, 0.15).unwrap()[0];
+    let points: Vec<[f64; 2]> = (0..5).map(|k| e.point_at(k as f64)).collect();
+    let quality = FitQuality {
+        points: 5,
+        inliers: 5,
+        rms_residual_px: 0.0,
+        score: 1.0,
+    };
+    let u = pose_uncertainty(&e, &cam, &pose, 0.15, &quality, &points);
+    assert!(u.normal_sigma_rad.is_nan());
+    assert!(u.position_cov_camera_m2.iter().all(|x| x.is_nan()));
+    // Enough points: known, and larger for a noisier fit.
+    let points: Vec<[f64; 2]> = (0..100).map(|k| e.point_at(k as f64 * 0.0628)).collect();
+    let sigma = |rms: f64| {
+        let q = FitQuality {
+            points: 100,
+            inliers: 100,
+            rms_residual_px: rms,
+            score: 1.0,
+        };
+        pose_uncertainty(&e, &cam, &pose, 0.15, &q, &points)
+    };
+    let (low, high) = (sigma(0.1), sigma(0.4));
+    assert!(low.normal_sigma_rad > 0.0 && high.normal_sigma_rad > 3.0 * low.normal_sigma_rad);
+    assert!(high.position_cov_camera_m2.trace() > 9.0 * low.position_cov_camera_m2.trace());
+}
+
 /// A drogue approaching from 20 m to 3 m while its normal swings through the
 /// frontal view and back (tilt from +20 to -20 degrees about a slowly turning
 /// axis). The canopy rim is seen in the first frame only; continuity must
@@ -408,17 +439,47 @@ fn covariance_is_consistent_with_actual_errors() {
 /// where the two solutions meet.
 #[test]
 fn continuity_follows_a_drogue_swinging_through_frontal() {
+    let worst_deg = swing(0.0, 20.0, 14);
+    println!("swinging drogue, exact ellipses: worst normal error {worst_deg:.2e} deg");
+}
+
+/// A drogue swinging between 12 and 28 degrees of tilt with Gaussian errors
+/// of 0.1 px on the ellipse's centre and semi-axes (a fit's errors): the rim
+/// is seen in the first frame only, and continuity must keep the true
+/// solution in every frame.
+///
+/// (Through a frontal view, continuity cannot be trusted with such errors:
+/// the normal's tilt goes with the square root of the ellipse's flattening,
+/// so near frontal it is mostly noise - about 6 degrees at 5 m for 0.1 px -
+/// and the track may come out of the crossing on the mirror solution. It is
+/// then corrected as soon as the canopy rim is seen.)
+#[test]
+fn continuity_with_fit_errors() {
+    for seed in 0..5 {
+        swing(0.1, 8.0, seed);
+    }
+}
+
+fn swing(sigma_px: f64, far_m: f64, seed: u64) -> f64 {
     let cam = camera();
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let mut tracker = Tracker::new(&Config::embedded().track).unwrap();
     let radius = 0.15;
     let frames = 300;
     let mut worst_deg = 0f64;
     for k in 0..frames {
         let time_s = k as f64 / 30.0;
-        let range = 20.0 - 17.0 * k as f64 / frames as f64;
+        let range = far_m - (far_m - 3.0) * k as f64 / frames as f64;
         let centre = Vector3::new(0.3 * (0.5 * time_s).sin(), -0.2, range);
         let toward_camera = -centre.normalize();
-        let tilt = 20f64.to_radians() * (std::f64::consts::TAU * time_s / 4.0).cos();
+        let swing_deg = 20.0 * (std::f64::consts::TAU * time_s / 4.0).cos();
+        // Exact ellipses swing through frontal; noisy ones stay 12..28 deg.
+        let tilt = if sigma_px == 0.0 {
+            swing_deg
+        } else {
+            20.0 + 0.4 * swing_deg
+        }
+        .to_radians();
         let axis_angle = 0.3 + 0.1 * time_s;
         let (u, v) = plane_basis(&toward_camera);
         let axis = axis_angle.cos() * u + axis_angle.sin() * v;
@@ -426,7 +487,14 @@ fn continuity_follows_a_drogue_swinging_through_frontal() {
             centre_camera_m: centre,
             normal_camera: nalgebra::Rotation3::new(axis * tilt) * toward_camera,
         };
-        let ellipse = exact_ellipse(&cam, &truth, radius);
+        let exact = exact_ellipse(&cam, &truth, radius);
+        let ellipse = Ellipse::new(
+            exact.cx + sigma_px * gauss(&mut rng),
+            exact.cy + sigma_px * gauss(&mut rng),
+            exact.a + sigma_px * gauss(&mut rng),
+            exact.b + sigma_px * gauss(&mut rng),
+            exact.theta + sigma_px / exact.a * gauss(&mut rng),
+        );
         let solutions = cone_pose(&ellipse, &cam, radius).unwrap();
         let i = nearest(&solutions, &truth);
         let supports = if k == 0 {
@@ -437,22 +505,47 @@ fn continuity_follows_a_drogue_swinging_through_frontal() {
             [None, None]
         };
         let choice = tracker.choose(solutions, supports, (time_s * 1e9) as u64, &ellipse);
-        let expected_how = if k == 0 {
-            Disambiguation::CanopyRim
-        } else {
-            Disambiguation::Continuity
-        };
-        assert_eq!(choice.how, expected_how, "frame {k}");
+        if k == 0 {
+            assert_eq!(choice.how, Disambiguation::CanopyRim);
+        }
         let err = angle(&choice.pose.normal_camera, &truth.normal_camera);
-        // Right solution; at the crossing itself both are within 2 x tilt.
-        assert!(
-            err < 1e-6 || err <= 2.0 * tilt.abs() + 1e-9,
-            "frame {k}: tilt {:.2} deg, chosen normal {:.2} deg off",
-            tilt.to_degrees(),
-            err.to_degrees()
-        );
+        let mirror = solutions[1 - i];
+        let on_mirror = choice.pose == mirror && err > 1e-6;
+        if sigma_px == 0.0 {
+            assert_eq!(
+                choice.how,
+                if k == 0 {
+                    Disambiguation::CanopyRim
+                } else {
+                    Disambiguation::Continuity
+                },
+                "frame {k}"
+            );
+            // Right solution; at the crossing itself both are within 2 x tilt.
+            assert!(
+                err < 1e-6 || err <= 2.0 * tilt.abs() + 1e-9,
+                "frame {k}: tilt {:.2} deg, chosen normal {:.2} deg off",
+                tilt.to_degrees(),
+                err.to_degrees()
+            );
+        } else {
+            assert_eq!(
+                choice.how,
+                if k == 0 {
+                    Disambiguation::CanopyRim
+                } else {
+                    Disambiguation::Continuity
+                },
+                "seed {seed} frame {k}"
+            );
+            assert!(
+                !on_mirror,
+                "seed {seed} frame {k}: on the mirror solution at tilt {:.1} deg",
+                tilt.to_degrees()
+            );
+        }
         worst_deg = worst_deg.max(err.to_degrees());
         assert_eq!(choice.track_epoch, 0);
     }
-    println!("swinging drogue: worst normal error {worst_deg:.2e} deg over {frames} frames");
+    worst_deg
 }

@@ -1,7 +1,10 @@
 //! The cone pose and the canopy-rim check on the independent renderer's
-//! reference frames (`paper10`), fed with the TRUTH ellipse: the pose must
-//! match the truth's position and both normals, and the canopy rim in the real
-//! image must pick the true normal wherever the tilt makes the two differ.
+//! reference frames (`paper10`, `occlusion`), fed with the TRUTH ellipse: the
+//! pose must match the truth's position and both normals, and the canopy rim
+//! in the real image must pick the true normal wherever the tilt exceeds 5
+//! degrees. Then the same with the truth ellipse disturbed by fit-sized
+//! errors: the answer given (counting the ambiguity) against the issue's
+//! targets.
 //!
 //! Runs when `DROGUE_REFERENCE_DIR` names the reference folder (the one with
 //! `paper10/`); skipped, saying so, when it is not set.

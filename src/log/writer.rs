@@ -22,6 +22,8 @@ use std::time::{Duration, Instant};
 const MESSAGE_OVERHEAD_BYTES: u64 = 40;
 /// Reports kept for `/log` while no file is open (the first ones matter).
 const MAX_PENDING_REPORTS: usize = 20;
+/// Queue-full drops are reported at most this often.
+const DROP_REPORT_INTERVAL: Duration = Duration::from_secs(5);
 
 thread_local! {
     /// Set on the writer thread: its own tracing events must not come back
@@ -56,6 +58,9 @@ pub(crate) struct Writer {
     buf: Vec<u8>,
     /// Reports made while no file was open, for `/log` of the next file.
     pending_reports: Vec<LogEvent>,
+    /// Queue-full drops already reported, and when.
+    reported_dropped: u64,
+    last_drop_report: Option<Instant>,
 }
 
 impl Writer {
@@ -84,6 +89,8 @@ impl Writer {
             },
             buf: Vec::with_capacity(2 << 20),
             pending_reports: Vec::new(),
+            reported_dropped: 0,
+            last_drop_report: None,
         }
     }
 
@@ -152,6 +159,7 @@ impl Writer {
             if Instant::now() >= next_sync {
                 self.sync();
                 self.rotate_if_due();
+                self.report_drops();
                 next_sync = Instant::now() + interval;
             }
         }
@@ -394,6 +402,30 @@ impl Writer {
             self.write_log_event(&event);
         } else if self.pending_reports.len() < MAX_PENDING_REPORTS {
             self.pending_reports.push(event);
+        }
+    }
+
+    /// Reports items dropped on a full queue since the last report (at most
+    /// every DROP_REPORT_INTERVAL, so a slow disk does not flood `/log`).
+    fn report_drops(&mut self) {
+        let dropped = self
+            .counters
+            .dropped_queue_full
+            .load(std::sync::atomic::Ordering::Relaxed);
+        let due = self
+            .last_drop_report
+            .is_none_or(|t| t.elapsed() >= DROP_REPORT_INTERVAL);
+        if dropped > self.reported_dropped && due {
+            self.report(
+                Level::Warning,
+                format!(
+                    "log queue full, the writer is behind: {} items dropped ({} in all)",
+                    dropped - self.reported_dropped,
+                    dropped
+                ),
+            );
+            self.reported_dropped = dropped;
+            self.last_drop_report = Some(Instant::now());
         }
     }
 

@@ -272,7 +272,8 @@ fn ellipse_covariance(
     jtj.try_inverse().map(|inv| inv * (sigma_px * sigma_px))
 }
 
-/// Uncertainty of one pose solution.
+/// Uncertainty of one pose solution. NaN where it is unknown (the MAVLink
+/// convention for an unknown covariance; JSON writes it as null).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct PoseUncertainty {
     /// Covariance of the centre, camera frame, square metres.
@@ -292,7 +293,8 @@ pub struct PoseUncertainty {
 /// normal is not differentiable (tilt ~ sqrt of the ellipse's eccentricity).
 ///
 /// Perturbed poses follow the solution whose normal is nearest to `pose`'s.
-/// Returns zeros when there are fewer than 6 points or the fit is degenerate.
+/// Unknown (NaN) with fewer than 6 inliers (a fit through 5 points has no
+/// residual to estimate the noise from) or a degenerate point spread.
 pub fn pose_uncertainty(
     ellipse_px: &Ellipse,
     camera: &CameraModel,
@@ -301,17 +303,17 @@ pub fn pose_uncertainty(
     quality: &FitQuality,
     inlier_points_px: &[[f64; 2]],
 ) -> PoseUncertainty {
-    let zero = PoseUncertainty {
-        position_cov_camera_m2: Matrix3::zeros(),
-        normal_sigma_rad: 0.0,
+    let unknown = PoseUncertainty {
+        position_cov_camera_m2: Matrix3::from_element(f64::NAN),
+        normal_sigma_rad: f64::NAN,
     };
     let n = inlier_points_px.len();
-    if n <= 5 || !quality.rms_residual_px.is_finite() {
-        return zero;
+    if n <= 5 || !(quality.rms_residual_px >= 0.0 && quality.rms_residual_px.is_finite()) {
+        return unknown;
     }
     let sigma_px = quality.rms_residual_px * (n as f64 / (n - 5) as f64).sqrt();
     let Some(cov_e) = ellipse_covariance(ellipse_px, inlier_points_px, sigma_px) else {
-        return zero;
+        return unknown;
     };
     let eig = cov_e.symmetric_eigen();
     let p0 = ellipse_params(ellipse_px);

@@ -11,6 +11,7 @@ use super::ellipse::Ellipse;
 use super::pose::{CirclePose, EllipseParams, ellipse_from_params, ellipse_params};
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
+use std::collections::VecDeque;
 
 /// `[track]` in the config.
 #[derive(Clone, Debug, Serialize, Deserialize)]
@@ -24,7 +25,8 @@ pub struct TrackConfig {
     /// ...and the better one has at least this support (0..1).
     pub canopy_min_support: f64,
     /// Continuity settles it when one solution's normal is closer to the
-    /// tracked normal (extrapolated at constant angular velocity) than the other's by at least this, degrees.
+    /// tracked normal (extrapolated at constant angular velocity) than the
+    /// other's by at least this, degrees.
     pub continuity_margin_deg: f64,
 }
 
@@ -46,8 +48,6 @@ struct TrackState {
     /// Rate of change of `ellipse` per second, once two detections are known.
     velocity_per_s: Option<EllipseParams>,
     normal_camera: Vector3<f64>,
-    /// Rate of change of the (unit) normal per second, once two are known.
-    normal_velocity_per_s: Option<Vector3<f64>>,
     /// The tracked normal came from a settled ambiguity (rim or continuity
     /// from a settled one), so continuity may settle the next frame.
     resolved: bool,
@@ -59,6 +59,8 @@ pub struct Tracker {
     canopy_min_support: f64,
     continuity_margin_rad: f64,
     track: Option<TrackState>,
+    /// The current track's last chosen normals with their times, oldest first.
+    normals: VecDeque<(u64, Vector3<f64>)>,
     epoch: u32,
     tracked_before: bool,
 }
@@ -67,29 +69,43 @@ fn angle(a: &Vector3<f64>, b: &Vector3<f64>) -> f64 {
     a.cross(b).norm().atan2(a.dot(b))
 }
 
+/// Chosen normals remembered for the continuity prediction.
+const NORMAL_HISTORY: usize = 8;
+
 /// Longest extrapolation of the normal, radians (about 11 degrees): a
 /// prediction further out than that is no better than the last normal.
 const MAX_NORMAL_EXTRAPOLATION_RAD: f64 = 0.2;
 
-impl TrackState {
-    /// The normal expected at `time_ns`, by constant angular velocity. This
-    /// matters when the drogue swings through a frontal view: there the two
-    /// solutions meet and part again, the true one carrying on, the mirror
-    /// one turning back; the last normal alone cannot tell them apart.
-    fn predicted_normal(&self, time_ns: u64) -> Vector3<f64> {
-        let Some(v) = self.normal_velocity_per_s else {
-            return self.normal_camera;
-        };
-        let dt_s = time_ns.saturating_sub(self.time_ns) as f64 * 1e-9;
-        let mut step = v * dt_s;
-        let len = step.norm();
-        if len > MAX_NORMAL_EXTRAPOLATION_RAD {
-            step *= MAX_NORMAL_EXTRAPOLATION_RAD / len;
-        }
-        (self.normal_camera + step)
-            .try_normalize(f64::EPSILON)
-            .unwrap_or(self.normal_camera)
+/// The normal expected at `time_ns` from the track's recent normals (oldest
+/// first, at least one): a least-squares straight line through them in time,
+/// i.e. constant angular velocity, fitted over several frames so that the
+/// fit's noise does not drive it. This matters when the drogue swings through
+/// a frontal view: there the two solutions meet and part again, the true one
+/// carrying on, the mirror one turning back; the last normal alone cannot
+/// tell them apart.
+fn predicted_normal(history: &VecDeque<(u64, Vector3<f64>)>, time_ns: u64) -> Option<Vector3<f64>> {
+    let &(last_ns, last) = history.back()?;
+    let seconds = |t: u64| (t as f64 - last_ns as f64) * 1e-9;
+    let n = history.len() as f64;
+    let mean_t = history.iter().map(|(t, _)| seconds(*t)).sum::<f64>() / n;
+    let mean_n = history.iter().map(|(_, v)| v).sum::<Vector3<f64>>() / n;
+    let (mut s_tt, mut s_tn) = (0.0, Vector3::zeros());
+    for (t, v) in history {
+        let dt = seconds(*t) - mean_t;
+        s_tt += dt * dt;
+        s_tn += dt * (v - mean_n);
     }
+    if s_tt <= 0.0 {
+        return Some(last);
+    }
+    let rate = s_tn / s_tt;
+    let predicted = mean_n + rate * (seconds(time_ns) - mean_t);
+    let mut step = predicted - last;
+    let len = step.norm();
+    if len > MAX_NORMAL_EXTRAPOLATION_RAD {
+        step *= MAX_NORMAL_EXTRAPOLATION_RAD / len;
+    }
+    Some((last + step).try_normalize(f64::EPSILON).unwrap_or(last))
 }
 
 impl Tracker {
@@ -118,6 +134,7 @@ impl Tracker {
             canopy_min_support: cfg.canopy_min_support,
             continuity_margin_rad: cfg.continuity_margin_deg.to_radians(),
             track: None,
+            normals: VecDeque::with_capacity(NORMAL_HISTORY),
             epoch: 0,
             tracked_before: false,
         })
@@ -145,8 +162,8 @@ impl Tracker {
 
     /// Picks one of the two cone solutions and updates the track:
     /// the canopy rim when it decides, else continuity with a settled track,
-    /// else unresolved (the solution nearest the track's predicted normal, or the first,
-    /// with the other reported as `alternative`).
+    /// else unresolved (the solution nearest the track's predicted normal, or
+    /// the first, with the other reported as `alternative`).
     pub fn choose(
         &mut self,
         solutions: [CirclePose; 2],
@@ -156,6 +173,7 @@ impl Tracker {
     ) -> Choice {
         let previous = self.fresh_track(capture_time_ns).copied();
         if previous.is_none() {
+            self.normals.clear();
             // A new track: after an earlier one, that is a re-acquisition.
             if self.tracked_before {
                 self.epoch = self.epoch.wrapping_add(1);
@@ -173,7 +191,8 @@ impl Tracker {
             _ => None,
         };
         let nearest_to_track = previous.map(|t| {
-            let expected = t.predicted_normal(capture_time_ns);
+            let expected =
+                predicted_normal(&self.normals, capture_time_ns).unwrap_or(t.normal_camera);
             let a0 = angle(&solutions[0].normal_camera, &expected);
             let a1 = angle(&solutions[1].normal_camera, &expected);
             let apart = angle(&solutions[0].normal_camera, &solutions[1].normal_camera);
@@ -193,19 +212,20 @@ impl Tracker {
 
         let params = ellipse_params(ellipse_px);
         let dt_s = previous.map(|t| (capture_time_ns - t.time_ns) as f64 * 1e-9);
-        let (velocity_per_s, normal_velocity_per_s) = match (previous, dt_s) {
-            (Some(t), Some(dt)) if dt > 0.0 => (
-                Some((params - t.ellipse) / dt),
-                Some((pose.normal_camera - t.normal_camera) / dt),
-            ),
-            _ => (None, None),
+        let velocity_per_s = match (previous, dt_s) {
+            (Some(t), Some(dt)) if dt > 0.0 => Some((params - t.ellipse) / dt),
+            _ => None,
         };
+        if self.normals.len() == NORMAL_HISTORY {
+            self.normals.pop_front();
+        }
+        self.normals
+            .push_back((capture_time_ns, pose.normal_camera));
         self.track = Some(TrackState {
             time_ns: capture_time_ns,
             ellipse: params,
             velocity_per_s,
             normal_camera: pose.normal_camera,
-            normal_velocity_per_s,
             resolved: how != Disambiguation::Unresolved,
         });
         Choice {
@@ -219,6 +239,7 @@ impl Tracker {
     /// Forgets the track entirely (the epoch starts again from 0).
     pub fn reset(&mut self) {
         self.track = None;
+        self.normals.clear();
         self.epoch = 0;
         self.tracked_before = false;
     }

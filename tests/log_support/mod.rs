@@ -116,7 +116,7 @@ pub fn frame(seq: u64, with_truth: bool) -> Frame {
 /// plus a known error of `error_m(seq)` along x (so review statistics have a
 /// known answer).
 pub fn measurement(seq: u64) -> Measurement {
-    let detection = (seq % 5 != 0).then(|| {
+    let detection = (!seq.is_multiple_of(5)).then(|| {
         let centre = centre_camera_m(seq) + Vector3::new(error_m(seq), 0.0, 0.0);
         let normal = normal_camera(seq);
         let rim: Vec<[f32; 2]> = (0..40)
@@ -145,7 +145,7 @@ pub fn measurement(seq: u64) -> Measurement {
                 score: 0.9,
             },
             track_epoch: 1,
-            inliers: (0..40).map(|i| i % 20 != 0).collect(),
+            inliers: (0..40u32).map(|i| !i.is_multiple_of(20)).collect(),
             rim_points_px: rim,
         }
     });
