@@ -19,6 +19,8 @@ struct Cli {
 enum Command {
     /// Offline measurement of a folder of images or an MCAP log, to JSON lines.
     Process(commands::process::ProcessArgs),
+    /// Render a simulated scenario to PNG frames, truth.jsonl and camera.yaml.
+    Sim(commands::sim::SimArgs),
 }
 
 fn init_tracing() {
@@ -43,6 +45,25 @@ fn main() -> ExitCode {
                 ExitCode::SUCCESS
             }
             Err(e @ commands::process::ProcessError::Output { .. }) => {
+                eprintln!("error: {e}");
+                ExitCode::from(1)
+            }
+            Err(e) => {
+                eprintln!("error: {e}");
+                ExitCode::from(2)
+            }
+        },
+        Command::Sim(args) => match commands::sim::run(&args) {
+            Ok(s) => {
+                eprintln!(
+                    "{} frames ({} expected detectable) written to {}",
+                    s.frames,
+                    s.expect_detect,
+                    s.out.display()
+                );
+                ExitCode::SUCCESS
+            }
+            Err(e @ commands::sim::SimCommandError::Output { .. }) => {
                 eprintln!("error: {e}");
                 ExitCode::from(1)
             }
