@@ -23,6 +23,8 @@ enum Command {
     Review(commands::review::ReviewArgs),
     /// Rewrite a cut-short MCAP log into a complete, indexed one.
     Recover(commands::recover::RecoverArgs),
+    /// Render a simulated scenario to PNG frames, truth.jsonl and camera.yaml.
+    Sim(commands::sim::SimArgs),
 }
 
 fn init_tracing() {
@@ -86,6 +88,25 @@ fn main() -> ExitCode {
                 ExitCode::SUCCESS
             }
             Err(e) => log_error_exit(e),
+        },
+        Command::Sim(args) => match commands::sim::run(&args) {
+            Ok(s) => {
+                eprintln!(
+                    "{} frames ({} expected detectable) written to {}",
+                    s.frames,
+                    s.expect_detect,
+                    s.out.display()
+                );
+                ExitCode::SUCCESS
+            }
+            Err(e @ commands::sim::SimCommandError::Output { .. }) => {
+                eprintln!("error: {e}");
+                ExitCode::from(1)
+            }
+            Err(e) => {
+                eprintln!("error: {e}");
+                ExitCode::from(2)
+            }
         },
     }
 }

@@ -2,7 +2,27 @@
 //!
 //! Deterministic for a seed. Every rendered frame comes with its exact truth
 //! ([`FrameTruth`]), computed from the geometry, never from the pixels.
-//! PUBLIC CONTRACT below; the implementation is the simulator work (issue 3).
+//!
+//! Pieces: [`scenario`] (TOML scenarios, builtin or from a file),
+//! [`trajectory`] (tanker, drogue with Dryden sway, bow wave and hose whip,
+//! receiver approach), [`camera`] (pinhole + plumb_bob, independent of
+//! drogue-vision's), [`conic`] (exact image ellipse and mirror pose),
+//! [`render`] (8-bit gray frames) and [`Simulator`] tying them together.
+
+pub mod camera;
+pub mod conic;
+pub mod error;
+pub mod geometry;
+pub mod render;
+pub mod scenario;
+pub mod simulator;
+pub mod trajectory;
+pub mod turbulence;
+
+pub use error::SimError;
+pub use scenario::{MountSpec, Scenario};
+pub use simulator::Simulator;
+pub use turbulence::Intensity;
 
 use serde::{Deserialize, Serialize};
 
@@ -58,4 +78,12 @@ pub struct FrameTruth {
     pub receiver_position_ned: [f64; 3],
     /// Receiver attitude body → NED, Hamilton quaternion w, x, y, z.
     pub receiver_q_ned_body: [f64; 4],
+    /// Capture time (mid-exposure), ns since the Unix epoch.
+    pub capture_time_ns: u64,
+    /// Radius of the canopy's outer rim, metres.
+    pub canopy_radius: f64,
+    /// Share of the inner rim visible (in front, in the image, not hidden).
+    pub visible_rim_frac: f64,
+    /// The probe is in the drogue (contact made).
+    pub coupled: bool,
 }

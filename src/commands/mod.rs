@@ -3,3 +3,4 @@
 pub mod process;
 pub mod recover;
 pub mod review;
+pub mod sim;

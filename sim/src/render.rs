@@ -1,0 +1,750 @@
+//! The renderer: 8-bit gray frames of the scene as the camera sees it.
+//!
+//! Exact perspective per pixel: a precomputed table gives every pixel's
+//! undistorted ray (the lens distortion), the ray is intersected with the
+//! drogue plane and tested against the radii. Edges are anti-aliased from
+//! the signed distance to each edge in pixels (the local pixel footprint in
+//! the drogue plane); the inner circle's edge, which carries the truth, is
+//! supersampled 4x4. Hose and probe are 3-D tubes (segment + tapering
+//! radius) tested per pixel by their closest approach to the ray. Sky and
+//! glare vary slowly and are evaluated on a coarse grid, bilinearly
+//! interpolated. Motion blur is a box filter along the drogue's image motion
+//! during the exposure, applied before the probe (which moves with the
+//! camera). Then vignetting, exposure gain, shot + read noise, 8-bit.
+
+use crate::camera::SimCamera;
+use crate::geometry::{M3, V3};
+use image::GrayImage;
+
+/// Sky grid spacing, pixels.
+const GRID: usize = 16;
+
+/// A tube (hose, probe): axis segment a -> b in the camera frame, radii.
+#[derive(Clone, Copy, Debug)]
+pub struct Tube {
+    pub a: V3,
+    pub b: V3,
+    pub radius_a: f64,
+    pub radius_b: f64,
+    pub radiance: f64,
+}
+
+impl Tube {
+    /// Closest approach of the ray t * d (d = (x, y, 1), t = depth) to the
+    /// tube's axis: (depth t, distance beyond the surface in metres,
+    /// distance from the axis over the radius).
+    #[inline]
+    pub fn probe_ray(&self, d: &V3) -> Option<(f64, f64, f64)> {
+        TubeAxis::new(self)?.probe_ray(d)
+    }
+
+    /// Whether the ray hits the tube nearer than `depth` (z, metres).
+    pub fn occludes(&self, d: &V3, depth: f64) -> bool {
+        matches!(self.probe_ray(d), Some((t, sd, _)) if sd < 0.0 && t < depth)
+    }
+
+    /// The part of the tube in front of the plane z = `near`.
+    pub fn clipped(&self, near: f64) -> Option<Tube> {
+        let (za, zb) = (self.a.z, self.b.z);
+        if za < near && zb < near {
+            return None;
+        }
+        let mut t = *self;
+        if za < near || zb < near {
+            let f = (near - za) / (zb - za);
+            let p = self.a + (self.b - self.a) * f;
+            let r = self.radius_a + (self.radius_b - self.radius_a) * f;
+            if za < near {
+                t.a = p;
+                t.radius_a = r;
+            } else {
+                t.b = p;
+                t.radius_b = r;
+            }
+        }
+        Some(t)
+    }
+}
+
+/// A tube's axis, precomputed for per-pixel tests.
+#[derive(Clone, Copy, Debug)]
+struct TubeAxis {
+    a: V3,
+    u: V3,
+    len: f64,
+    ua: f64,
+    radius_a: f64,
+    radius_slope: f64,
+}
+
+impl TubeAxis {
+    fn new(t: &Tube) -> Option<TubeAxis> {
+        let seg = t.b - t.a;
+        let len = seg.norm();
+        (len > 1e-12).then(|| {
+            let u = seg / len;
+            TubeAxis {
+                a: t.a,
+                u,
+                len,
+                ua: u.dot(&t.a),
+                radius_a: t.radius_a,
+                radius_slope: (t.radius_b - t.radius_a) / len,
+            }
+        })
+    }
+
+    #[inline]
+    fn probe_ray(&self, d: &V3) -> Option<(f64, f64, f64)> {
+        let dd = d.dot(d);
+        let du = d.dot(&self.u);
+        let da = d.dot(&self.a);
+        let den = dd - du * du;
+        let s = if den > 1e-14 {
+            let t = (da - self.ua * du) / den;
+            t * du - self.ua
+        } else {
+            0.0
+        };
+        let s = s.clamp(0.0, self.len);
+        let t = (da + s * du) / dd;
+        if t <= 0.0 {
+            return None;
+        }
+        let dist = (d * t - self.a - self.u * s).norm();
+        let r = self.radius_a + self.radius_slope * s;
+        Some((t, dist - r, dist / r.max(1e-9)))
+    }
+}
+
+/// The drogue in the camera frame.
+#[derive(Clone, Copy, Debug)]
+pub struct DrogueView {
+    pub centre: V3,
+    /// Unit normal toward the camera.
+    pub normal: V3,
+    /// In-plane basis; struts are laid out from `e1`.
+    pub e1: V3,
+    pub e2: V3,
+    pub inner_radius: f64,
+    pub canopy_radius: f64,
+    pub rim_width: f64,
+    pub struts: u32,
+    pub strut_width: f64,
+    pub disc: f64,
+    pub canopy: f64,
+    pub rim: f64,
+    pub strut: f64,
+}
+
+/// Everything one frame needs, in the camera frame.
+#[derive(Clone, Debug)]
+pub struct FrameScene {
+    pub drogue: DrogueView,
+    pub hose: Option<Tube>,
+    pub probe: Option<Tube>,
+    /// Camera -> NED rotation (for the sky).
+    pub r_ned_cam: M3,
+    /// Image motion of the drogue during the exposure, pixels.
+    pub blur_px: [f64; 2],
+    pub noise_seed: u64,
+}
+
+/// Scene-wide look (from the scenario).
+#[derive(Clone, Debug)]
+pub struct Look {
+    pub sky_zenith: f64,
+    pub sky_horizon: f64,
+    pub ground: f64,
+    pub cloud_cover: f64,
+    pub cloud_radiance: f64,
+    pub sun_ned: V3,
+    pub glare: f64,
+    pub haze: f64,
+    pub haze_radiance: f64,
+    pub gain: f64,
+    pub read_noise_dn: f64,
+    pub shot_noise_dn: f64,
+    pub vignette: f64,
+    pub cloud_seed: u32,
+}
+
+pub struct Renderer {
+    cam: SimCamera,
+    w: usize,
+    h: usize,
+    /// Undistorted normalised ray (x, y) of every pixel.
+    rays: Vec<[f32; 2]>,
+    vignette: Vec<f32>,
+    gw: usize,
+    gh: usize,
+    grid_rays: Vec<V3>,
+    look: Look,
+    gauss: Vec<f32>,
+    rad: Vec<f32>,
+    scratch: Vec<f32>,
+}
+
+fn hash2(ix: i32, iy: i32, seed: u32) -> f32 {
+    let mut h = (ix as u32).wrapping_mul(0x8da6_b343)
+        ^ (iy as u32).wrapping_mul(0xd816_3841)
+        ^ seed.wrapping_mul(0xcb1a_b31f);
+    h ^= h >> 13;
+    h = h.wrapping_mul(0x5bd1_e995);
+    h ^= h >> 15;
+    (h & 0x00ff_ffff) as f32 / 16_777_216.0
+}
+
+fn value_noise(x: f64, y: f64, seed: u32) -> f32 {
+    let (fx, fy) = (x.floor(), y.floor());
+    let (ix, iy) = (fx as i32, fy as i32);
+    let (tx, ty) = ((x - fx) as f32, (y - fy) as f32);
+    let (sx, sy) = (tx * tx * (3.0 - 2.0 * tx), ty * ty * (3.0 - 2.0 * ty));
+    let a = hash2(ix, iy, seed);
+    let b = hash2(ix + 1, iy, seed);
+    let c = hash2(ix, iy + 1, seed);
+    let d = hash2(ix + 1, iy + 1, seed);
+    (a + (b - a) * sx) + ((c + (d - c) * sx) - (a + (b - a) * sx)) * sy
+}
+
+fn fbm(x: f64, y: f64, seed: u32) -> f32 {
+    let mut sum = 0.0;
+    let mut amp = 0.5;
+    let mut f = 1.0;
+    for o in 0..5 {
+        sum += amp * value_noise(x * f, y * f, seed.wrapping_add(o));
+        amp *= 0.5;
+        f *= 2.03;
+    }
+    sum / 0.96875
+}
+
+/// Inverse normal CDF (Acklam's rational approximation, |error| < 1.2e-9).
+fn inv_normal(p: f64) -> f64 {
+    const A: [f64; 6] = [
+        -3.969683028665376e1,
+        2.209460984245205e2,
+        -2.759285104469687e2,
+        1.383_577_518_672_69e2,
+        -3.066479806614716e1,
+        2.506628277459239,
+    ];
+    const B: [f64; 5] = [
+        -5.447609879822406e1,
+        1.615858368580409e2,
+        -1.556989798598866e2,
+        6.680131188771972e1,
+        -1.328068155288572e1,
+    ];
+    const C: [f64; 6] = [
+        -7.784894002430293e-3,
+        -3.223964580411365e-1,
+        -2.400758277161838,
+        -2.549732539343734,
+        4.374664141464968,
+        2.938163982698783,
+    ];
+    const D: [f64; 4] = [
+        7.784695709041462e-3,
+        3.224671290700398e-1,
+        2.445134137142996,
+        3.754408661907416,
+    ];
+    let pl = 0.02425;
+    if p < pl {
+        let q = (-2.0 * p.ln()).sqrt();
+        (((((C[0] * q + C[1]) * q + C[2]) * q + C[3]) * q + C[4]) * q + C[5])
+            / ((((D[0] * q + D[1]) * q + D[2]) * q + D[3]) * q + 1.0)
+    } else if p <= 1.0 - pl {
+        let q = p - 0.5;
+        let r = q * q;
+        (((((A[0] * r + A[1]) * r + A[2]) * r + A[3]) * r + A[4]) * r + A[5]) * q
+            / (((((B[0] * r + B[1]) * r + B[2]) * r + B[3]) * r + B[4]) * r + 1.0)
+    } else {
+        -inv_normal(1.0 - p)
+    }
+}
+
+#[inline]
+fn clamp01(x: f64) -> f64 {
+    x.clamp(0.0, 1.0)
+}
+
+impl Renderer {
+    pub fn new(cam: &SimCamera, look: Look) -> Renderer {
+        let (w, h) = (cam.width as usize, cam.height as usize);
+        let pinhole = |u: f64, v: f64| ((u - cam.cx) / cam.fx, (v - cam.cy) / cam.fy);
+        let ray_of = |u: f64, v: f64| -> (f64, f64) {
+            let (xd, yd) = pinhole(u, v);
+            cam.undistort_normalized(xd, yd).unwrap_or((xd, yd))
+        };
+        let mut rays = Vec::with_capacity(w * h);
+        let mut vignette = Vec::with_capacity(w * h);
+        let r_corner2 =
+            (cam.cx.max(w as f64 - cam.cx)).powi(2) + (cam.cy.max(h as f64 - cam.cy)).powi(2);
+        for v in 0..h {
+            for u in 0..w {
+                let (x, y) = ray_of(u as f64, v as f64);
+                rays.push([x as f32, y as f32]);
+                let r2 = ((u as f64 - cam.cx).powi(2) + (v as f64 - cam.cy).powi(2)) / r_corner2;
+                vignette.push((1.0 - look.vignette * r2 * (0.6 + 0.4 * r2)) as f32);
+            }
+        }
+        let gw = w.div_ceil(GRID) + 1;
+        let gh = h.div_ceil(GRID) + 1;
+        let mut grid_rays = Vec::with_capacity(gw * gh);
+        for j in 0..gh {
+            for i in 0..gw {
+                let (x, y) = ray_of((i * GRID) as f64, (j * GRID) as f64);
+                grid_rays.push(V3::new(x, y, 1.0).normalize());
+            }
+        }
+        // 2^16 normal quantiles in a fixed pseudo-random order.
+        let n = 1usize << 16;
+        let mut gauss: Vec<f32> = (0..n)
+            .map(|i| inv_normal((i as f64 + 0.5) / n as f64) as f32)
+            .collect();
+        let mut st = 0x2545_f491_4f6c_dd1du64;
+        for i in (1..n).rev() {
+            st ^= st << 13;
+            st ^= st >> 7;
+            st ^= st << 17;
+            gauss.swap(i, (st % (i as u64 + 1)) as usize);
+        }
+        Renderer {
+            cam: cam.clone(),
+            w,
+            h,
+            rays,
+            vignette,
+            gw,
+            gh,
+            grid_rays,
+            look,
+            gauss,
+            rad: vec![0.0; w * h],
+            scratch: Vec::new(),
+        }
+    }
+
+    #[inline]
+    fn ray(&self, u: usize, v: usize) -> V3 {
+        let r = self.rays[v * self.w + u];
+        V3::new(r[0] as f64, r[1] as f64, 1.0)
+    }
+
+    /// Ray steps to the next pixel in u and v (the local lens Jacobian).
+    #[inline]
+    fn ray_steps(&self, u: usize, v: usize) -> (V3, V3) {
+        let (u0, u1) = if u + 1 < self.w {
+            (u, u + 1)
+        } else {
+            (u - 1, u)
+        };
+        let (v0, v1) = if v + 1 < self.h {
+            (v, v + 1)
+        } else {
+            (v - 1, v)
+        };
+        (
+            self.ray(u1, v) - self.ray(u0, v),
+            self.ray(u, v1) - self.ray(u, v0),
+        )
+    }
+
+    fn haze(&self, x: f64) -> f64 {
+        x * (1.0 - self.look.haze) + self.look.haze_radiance * self.look.haze
+    }
+
+    fn sky(&self, d_ned: &V3) -> (f32, f32) {
+        let l = &self.look;
+        let el = (-d_ned.z).clamp(-1.0, 1.0).asin();
+        let az = d_ned.y.atan2(d_ned.x);
+        let base = if el >= 0.0 {
+            l.sky_horizon + (l.sky_zenith - l.sky_horizon) * (1.0 - (-el / 0.35).exp())
+        } else {
+            l.ground + (l.sky_horizon - l.ground) * (el / 0.04).exp()
+        };
+        let mut value = base;
+        if l.cloud_cover > 0.0 {
+            let c = fbm(az * 5.0, el * 9.0, l.cloud_seed) as f64;
+            let lo = 1.0 - l.cloud_cover - 0.08;
+            let x = clamp01((c - lo) / 0.22);
+            let cov = x * x * (3.0 - 2.0 * x);
+            let shade = 0.88 + 0.12 * fbm(az * 17.0, el * 30.0, l.cloud_seed ^ 0x55) as f64;
+            value = base + (l.cloud_radiance * shade - base) * cov;
+        }
+        let mut veil = 0.0;
+        if l.glare > 0.0 {
+            let ang = d_ned.dot(&l.sun_ned).clamp(-1.0, 1.0).acos();
+            veil = l.glare
+                * (1.5 * (-(ang / 0.02).powi(2)).exp() + 0.12 / (1.0 + (ang / 0.08).powi(2)));
+        }
+        (value as f32, veil as f32)
+    }
+
+    /// Renders one frame.
+    pub fn render(&mut self, scene: &FrameScene) -> GrayImage {
+        let (w, h) = (self.w, self.h);
+        // 1. Sky on the coarse grid, bilinear to every pixel.
+        let mut sky_grid = vec![0f32; self.gw * self.gh];
+        let mut veil_grid = vec![0f32; self.gw * self.gh];
+        for (k, r) in self.grid_rays.iter().enumerate() {
+            let (s, v) = self.sky(&(scene.r_ned_cam * r));
+            sky_grid[k] = s;
+            veil_grid[k] = v;
+        }
+        let mut rad = std::mem::take(&mut self.rad);
+        let ix: Vec<(usize, f32)> = (0..w)
+            .map(|u| (u / GRID, (u % GRID) as f32 / GRID as f32))
+            .collect();
+        let mut row = vec![0f32; self.gw];
+        for v in 0..h {
+            let (j, fy) = (v / GRID, (v % GRID) as f32 / GRID as f32);
+            let (g0, g1) = (
+                &sky_grid[j * self.gw..(j + 1) * self.gw],
+                &sky_grid[(j + 1) * self.gw..(j + 2) * self.gw],
+            );
+            for i in 0..self.gw {
+                row[i] = g0[i] + (g1[i] - g0[i]) * fy;
+            }
+            let out = &mut rad[v * w..(v + 1) * w];
+            for (o, &(i, fx)) in out.iter_mut().zip(&ix) {
+                *o = row[i] + (row[i + 1] - row[i]) * fx;
+            }
+        }
+        // 2. Hose (behind the drogue), drogue, blur, probe.
+        if let Some(hose) = scene.hose.and_then(|t| t.clipped(0.05)) {
+            self.draw_tube(&mut rad, &hose, None);
+        }
+        let bbox = self.drogue_bbox(&scene.drogue);
+        if let Some(b) = bbox {
+            self.draw_drogue(&mut rad, &scene.drogue, b);
+            let m = scene.blur_px;
+            if (m[0] * m[0] + m[1] * m[1]).sqrt() >= 0.3 {
+                self.blur(&mut rad, b, m);
+            }
+        }
+        if let Some(probe) = scene.probe.and_then(|t| t.clipped(0.05)) {
+            self.draw_tube(&mut rad, &probe, Some(&scene.drogue));
+        }
+        // 3. Sensor: vignette, glare veil, gain, noise, 8 bits.
+        let img = self.sensor(&rad, &veil_grid, &ix, scene.noise_seed);
+        self.rad = rad;
+        img
+    }
+
+    /// Pixel bounding box (u0, v0, u1, v1), inclusive, of the canopy.
+    fn drogue_bbox(&self, d: &DrogueView) -> Option<(usize, usize, usize, usize)> {
+        let (mut u0, mut v0, mut u1, mut v1) = (f64::MAX, f64::MAX, f64::MIN, f64::MIN);
+        let r = d.canopy_radius * 1.02;
+        for k in 0..72 {
+            let a = k as f64 * std::f64::consts::TAU / 72.0;
+            let p = d.centre + (d.e1 * a.cos() + d.e2 * a.sin()) * r;
+            if p.z < 0.02 {
+                return Some((0, 0, self.w - 1, self.h - 1));
+            }
+            // Beyond the lens model's range: fall back to the whole frame.
+            let (x, y) = (p.x / p.z, p.y / p.z);
+            if x.abs() > 2.0 || y.abs() > 2.0 {
+                return Some((0, 0, self.w - 1, self.h - 1));
+            }
+            let q = self.cam.project_px(&p)?;
+            u0 = u0.min(q[0]);
+            v0 = v0.min(q[1]);
+            u1 = u1.max(q[0]);
+            v1 = v1.max(q[1]);
+        }
+        let m = 3.0;
+        if u1 < -m || v1 < -m || u0 > self.w as f64 + m || v0 > self.h as f64 + m {
+            return None;
+        }
+        let cl = |x: f64, hi: usize| (x.max(0.0) as usize).min(hi - 1);
+        Some((
+            cl(u0 - m, self.w),
+            cl(v0 - m, self.h),
+            cl(u1 + m + 1.0, self.w),
+            cl(v1 + m + 1.0, self.h),
+        ))
+    }
+
+    fn draw_drogue(&self, rad: &mut [f32], d: &DrogueView, b: (usize, usize, usize, usize)) {
+        let nc = d.normal.dot(&d.centre);
+        if nc >= 0.0 {
+            return;
+        }
+        let strut_dirs: Vec<(f64, f64)> = (0..d.struts)
+            .map(|k| {
+                let a = k as f64 * std::f64::consts::TAU / d.struts as f64;
+                (a.cos(), a.sin())
+            })
+            .collect();
+        let half_strut = d.strut_width * 0.5;
+        let disc = self.haze(d.disc) as f32;
+        for v in b.1..=b.3 {
+            for u in b.0..=b.2 {
+                let ray = self.ray(u, v);
+                let nd = d.normal.dot(&ray);
+                if nd >= -1e-12 {
+                    continue;
+                }
+                let t = nc / nd;
+                let q = ray * t - d.centre;
+                let (x, y) = (q.dot(&d.e1), q.dot(&d.e2));
+                let rho = (x * x + y * y).sqrt();
+                if rho > d.canopy_radius * 1.03 {
+                    continue;
+                }
+                // Pixel footprint: |grad rho| in metres per pixel.
+                let (su, sv) = self.ray_steps(u, v);
+                let dx_du = (su - ray * (d.normal.dot(&su) / nd)) * t;
+                let dx_dv = (sv - ray * (d.normal.dot(&sv) / nd)) * t;
+                let radial = if rho > 1e-9 {
+                    (d.e1 * x + d.e2 * y) / rho
+                } else {
+                    d.e1
+                };
+                let s = (dx_du.dot(&radial).powi(2) + dx_dv.dot(&radial).powi(2))
+                    .sqrt()
+                    .max(1e-12);
+                let alpha = clamp01(0.5 - (rho - d.canopy_radius) / s);
+                if alpha <= 0.0 {
+                    continue;
+                }
+                // Canopy: radial shading toward the disc, side light.
+                let radial_f = (rho - d.inner_radius) / (d.canopy_radius - d.inner_radius);
+                let mut val =
+                    d.canopy * (0.82 + 0.18 * clamp01(radial_f)) * (1.0 + 0.06 * x / rho.max(1e-9));
+                let mut strut_cov: f64 = 0.0;
+                for &(c, sn) in &strut_dirs {
+                    if x * c + y * sn > 0.0 {
+                        let perp = (-x * sn + y * c).abs();
+                        strut_cov = strut_cov.max(clamp01(0.5 - (perp - half_strut) / s));
+                    }
+                }
+                val += (d.strut - val) * strut_cov;
+                let rim_cov = clamp01(0.5 + (rho - (d.canopy_radius - d.rim_width)) / s);
+                val += (d.rim - val) * rim_cov;
+                // Inner circle: supersampled 4x4 near its edge.
+                let edge = (rho - d.inner_radius) / s;
+                let disc_cov = if edge.abs() < 1.2 {
+                    let mut n = 0;
+                    for j in 0..4 {
+                        for i in 0..4 {
+                            let (du, dv) = ((i as f64 - 1.5) / 4.0, (j as f64 - 1.5) / 4.0);
+                            let r2 = ray + su * du + sv * dv;
+                            let t2 = nc / d.normal.dot(&r2);
+                            let q2 = r2 * t2 - d.centre;
+                            if q2.norm_squared() < d.inner_radius * d.inner_radius {
+                                n += 1;
+                            }
+                        }
+                    }
+                    n as f64 / 16.0
+                } else if edge < 0.0 {
+                    1.0
+                } else {
+                    0.0
+                };
+                let val = self.haze(val) as f32;
+                let val = val + (disc - val) * disc_cov as f32;
+                let o = &mut rad[v * self.w + u];
+                *o += (val - *o) * alpha as f32;
+            }
+        }
+    }
+
+    /// Per image row, the pixel span (u0, u1) that may show the tube: the
+    /// axis projected at a few points, each with its radius in pixels, and
+    /// the band between consecutive points.
+    fn tube_spans(&self, tube: &Tube) -> Vec<(usize, usize, usize)> {
+        const N: usize = 24;
+        let mut pts: Vec<(f64, f64, f64)> = Vec::with_capacity(N + 1);
+        for k in 0..=N {
+            let f = k as f64 / N as f64;
+            let p = tube.a + (tube.b - tube.a) * f;
+            let r = tube.radius_a + (tube.radius_b - tube.radius_a) * f;
+            let (x, y) = (p.x / p.z, p.y / p.z);
+            let q = if x.abs() > 1.5 || y.abs() > 1.5 {
+                // Outside the lens model's range: pinhole, clamped far out.
+                [
+                    self.cam.fx * x.clamp(-3.0, 3.0) + self.cam.cx,
+                    self.cam.fy * y.clamp(-3.0, 3.0) + self.cam.cy,
+                ]
+            } else {
+                match self.cam.project_px(&p) {
+                    Some(q) => q,
+                    None => continue,
+                }
+            };
+            pts.push((q[0], q[1], self.cam.fx * r / p.z * 1.2 + 3.0));
+        }
+        let mut spans = Vec::new();
+        for v in 0..self.h {
+            let vf = v as f64;
+            let (mut lo, mut hi) = (f64::MAX, f64::MIN);
+            for pair in pts.windows(2) {
+                let ((u0, v0, r0), (u1, v1, r1)) = (pair[0], pair[1]);
+                let rm = r0.max(r1);
+                if vf < v0.min(v1) - rm || vf > v0.max(v1) + rm {
+                    continue;
+                }
+                let (du, dv) = (u1 - u0, v1 - v0);
+                let len = (du * du + dv * dv).sqrt();
+                let (mut a, mut b) = (u0.min(u1) - rm, u0.max(u1) + rm);
+                if dv.abs() > 1e-9 {
+                    let f = ((vf - v0) / dv).clamp(0.0, 1.0);
+                    let uc = u0 + du * f;
+                    let half = rm * len / dv.abs() + rm;
+                    a = a.max(uc - half);
+                    b = b.min(uc + half);
+                }
+                lo = lo.min(a);
+                hi = hi.max(b);
+            }
+            if hi >= 0.0 && lo <= (self.w - 1) as f64 && lo <= hi {
+                spans.push((
+                    v,
+                    lo.max(0.0) as usize,
+                    (hi.min((self.w - 1) as f64)) as usize,
+                ));
+            }
+        }
+        spans
+    }
+
+    fn draw_tube(&self, rad: &mut [f32], tube: &Tube, in_front_of: Option<&DrogueView>) {
+        let Some(axis) = TubeAxis::new(tube) else {
+            return;
+        };
+        let px = 1.0 / self.cam.fx;
+        let base = tube.radiance;
+        for (v, u0, u1) in self.tube_spans(tube) {
+            for u in u0..=u1 {
+                let ray = self.ray(u, v);
+                let Some((t, sd, k)) = axis.probe_ray(&ray) else {
+                    continue;
+                };
+                let cov = clamp01(0.5 - sd / (t * px));
+                if cov <= 0.0 {
+                    continue;
+                }
+                if let Some(d) = in_front_of {
+                    // The drogue hides the tube where it is nearer.
+                    let nd = d.normal.dot(&ray);
+                    if nd < 0.0 {
+                        let tp = d.normal.dot(&d.centre) / nd;
+                        if tp > 0.0 && tp < t && (ray * tp - d.centre).norm() < d.canopy_radius {
+                            continue;
+                        }
+                    }
+                }
+                let k = k.min(1.0);
+                let shade = base * (0.7 + 0.45 * (1.0 - k * k).sqrt())
+                    + 0.25 * base * (-((k - 0.45) / 0.12).powi(2)).exp();
+                let val = self.haze(shade) as f32;
+                let o = &mut rad[v * self.w + u];
+                *o += (val - *o) * cov as f32;
+            }
+        }
+    }
+
+    /// Box blur along `m` (pixels, centred) within the box.
+    fn blur(&mut self, rad: &mut [f32], b: (usize, usize, usize, usize), m: [f64; 2]) {
+        let len = (m[0] * m[0] + m[1] * m[1]).sqrt();
+        let pad = (len / 2.0).ceil() as usize + 2;
+        let (u0, v0) = (b.0.saturating_sub(pad), b.1.saturating_sub(pad));
+        let (u1, v1) = ((b.2 + pad).min(self.w - 1), (b.3 + pad).min(self.h - 1));
+        let (bw, bh) = (u1 - u0 + 1, v1 - v0 + 1);
+        self.scratch.clear();
+        for v in v0..=v1 {
+            self.scratch
+                .extend_from_slice(&rad[v * self.w + u0..=v * self.w + u1]);
+        }
+        let taps = ((2.0 * len).ceil() as usize + 1).max(3);
+        let src = &self.scratch;
+        let sample = |x: f64, y: f64| -> f32 {
+            let x = x.clamp(0.0, (bw - 1) as f64);
+            let y = y.clamp(0.0, (bh - 1) as f64);
+            let (xi, yi) = (
+                (x as usize).min(bw.saturating_sub(2)),
+                (y as usize).min(bh.saturating_sub(2)),
+            );
+            let (fx, fy) = ((x - xi as f64) as f32, (y - yi as f64) as f32);
+            let p = |xx: usize, yy: usize| src[(yy.min(bh - 1)) * bw + xx.min(bw - 1)];
+            let top = p(xi, yi) + (p(xi + 1, yi) - p(xi, yi)) * fx;
+            let bot = p(xi, yi + 1) + (p(xi + 1, yi + 1) - p(xi, yi + 1)) * fx;
+            top + (bot - top) * fy
+        };
+        let offs: Vec<(f64, f64)> = (0..taps)
+            .map(|k| {
+                let f = k as f64 / (taps - 1) as f64 - 0.5;
+                (m[0] * f, m[1] * f)
+            })
+            .collect();
+        for y in 0..bh {
+            for x in 0..bw {
+                let mut acc = 0.0;
+                for &(dx, dy) in &offs {
+                    acc += sample(x as f64 + dx, y as f64 + dy);
+                }
+                rad[(v0 + y) * self.w + u0 + x] = acc / taps as f32;
+            }
+        }
+    }
+
+    fn sensor(&self, rad: &[f32], veil_grid: &[f32], ix: &[(usize, f32)], seed: u64) -> GrayImage {
+        let (w, h) = (self.w, self.h);
+        let l = &self.look;
+        let gain = (255.0 * l.gain) as f32;
+        let noisy = l.read_noise_dn > 0.0 || l.shot_noise_dn > 0.0;
+        let sigma_of: Vec<f32> = (0..256)
+            .map(|dn| ((l.read_noise_dn.powi(2) + l.shot_noise_dn * dn as f64).sqrt()) as f32)
+            .collect();
+        let glare = l.glare > 0.0;
+        let mut out = vec![0u8; w * h];
+        let mut state = seed ^ 0x9e37_79b9_7f4a_7c15;
+        let mut next = move || {
+            state ^= state >> 12;
+            state ^= state << 25;
+            state ^= state >> 27;
+            state.wrapping_mul(0x2545_f491_4f6c_dd1d)
+        };
+        let mask = self.gauss.len() - 1;
+        let mut veil_row = vec![0f32; self.gw];
+        let mut row = vec![0f32; w];
+        for v in 0..h {
+            let src = &rad[v * w..(v + 1) * w];
+            let vig = &self.vignette[v * w..(v + 1) * w];
+            for ((r, s), g) in row.iter_mut().zip(src).zip(vig) {
+                *r = s * g * gain;
+            }
+            if glare {
+                let (j, fy) = (v / GRID, (v % GRID) as f32 / GRID as f32);
+                for (i, slot) in veil_row.iter_mut().enumerate() {
+                    let a = veil_grid[j * self.gw + i];
+                    *slot = a + (veil_grid[(j + 1) * self.gw + i] - a) * fy;
+                }
+                for (r, &(i, fx)) in row.iter_mut().zip(ix) {
+                    *r += (veil_row[i] + (veil_row[i + 1] - veil_row[i]) * fx) * gain;
+                }
+            }
+            let dst = &mut out[v * w..(v + 1) * w];
+            if noisy {
+                // Gaussian noise: a random run of the precomputed table.
+                let off = next() as usize;
+                for (k, (o, &dn)) in dst.iter_mut().zip(&row).enumerate() {
+                    let g = self.gauss[(off + k) & mask];
+                    let q = dn.clamp(0.0, 255.0);
+                    *o = (q + g * sigma_of[q as usize] + 0.5).clamp(0.0, 255.0) as u8;
+                }
+            } else {
+                for (o, &dn) in dst.iter_mut().zip(&row) {
+                    *o = (dn + 0.5).clamp(0.0, 255.0) as u8;
+                }
+            }
+        }
+        GrayImage::from_raw(w as u32, h as u32, out)
+            .unwrap_or_else(|| GrayImage::new(w as u32, h as u32))
+    }
+}
