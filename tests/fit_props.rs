@@ -198,7 +198,13 @@ fn rim_strategy() -> impl Strategy<Value = (f64, f64, f64, f64, f64, f64, usize,
 }
 
 proptest! {
-    #![proptest_config(ProptestConfig { cases: 96, ..ProptestConfig::default() })]
+    // A fixed seed: the same 256 rims on every run (CI stays reproducible);
+    // a failure shrinks to a case that can be replayed.
+    #![proptest_config(ProptestConfig {
+        cases: 256,
+        rng_seed: proptest::test_runner::RngSeed::Fixed(2026),
+        ..ProptestConfig::default()
+    })]
 
     /// Random ellipses (semi-axes 30-400 px), noise 0.05-0.3 px, up to 40 %
     /// of the rim replaced by a structured outlier run plus scattered
@@ -223,6 +229,11 @@ proptest! {
         let rim_kept = r.inliers.iter().zip(&set.outlier).filter(|(k, o)| **k && !**o).count();
         prop_assert!(rim_kept * 10 >= rim * 9, "kept {} of {} rim points", rim_kept, rim);
     }
+
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 256, ..ProptestConfig::default() })]
 
     /// Any input at all: no panic, and a result is a finite ellipse with one
     /// flag per input point.
