@@ -316,3 +316,46 @@ fn too_few_points_is_an_error_not_a_guess() {
     assert_eq!(f.fit(&four, 0), Err(FitError::TooFewPoints(4)));
     assert_eq!(f.fit(&with_nan, 0), Err(FitError::TooFewPoints(4)));
 }
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 512, ..ProptestConfig::default() })]
+
+    /// Ellipse -> conic -> ellipse is the identity, for any scaling of the
+    /// conic; the centre agrees with the paper's closed forms (eqs. 3-4) and
+    /// the axis direction with eq. 7 (which gives it modulo 90 deg).
+    #[test]
+    fn ellipse_conic_round_trip(
+        cx in -2000.0f64..2000.0,
+        cy in -2000.0f64..2000.0,
+        a in 1.0f64..1000.0,
+        ratio in 0.05f64..1.0,
+        theta in -1.57f64..1.57,
+        k in prop_oneof![-1.0e3f64..-1.0e-3, 1.0e-3f64..1.0e3],
+    ) {
+        let e = Ellipse::new(cx, cy, a, a * ratio, theta);
+        let c = e.to_conic();
+        let scaled = drogue_vision::measure::ellipse::Conic {
+            a: c.a * k, b: c.b * k, c: c.c * k, d: c.d * k, e: c.e * k, f: c.f * k,
+        };
+        let back = scaled.to_ellipse().unwrap();
+        let tol = 1e-7 * (a + cx.abs() + cy.abs());
+        prop_assert!(back.max_param_error_px(&e) < tol, "{:?} {:?}", e, back);
+        if ratio < 0.99 {
+            prop_assert!(back.theta_error_rad(&e) < 1e-6);
+            // Eq. 7: theta = atan(B / (A - C)) / 2, modulo 90 deg.
+            let t7 = 0.5 * (c.b / (c.a - c.c)).atan();
+            let d = (t7 - e.theta).rem_euclid(std::f64::consts::FRAC_PI_2);
+            prop_assert!(d.min(std::f64::consts::FRAC_PI_2 - d) < 1e-6, "eq 7: {} vs {}", t7, e.theta);
+        }
+        // Eqs. 3-4.
+        let den = 4.0 * c.a * c.c - c.b * c.b;
+        let xe = (c.b * c.e - 2.0 * c.c * c.d) / den;
+        let ye = (c.b * c.d - 2.0 * c.a * c.e) / den;
+        prop_assert!((xe - cx).abs() < tol && (ye - cy).abs() < tol);
+        // Points of the ellipse are on the conic.
+        for t in [0.0, 1.0, 2.5, 4.0] {
+            let [u, v] = e.point_at(t);
+            prop_assert!(c.sampson_distance(u, v) < 1e-6 * a.max(1.0));
+        }
+    }
+}
