@@ -173,8 +173,8 @@ impl FitConfig {
             ("algorithm1_subsets", self.algorithm1_subsets),
             ("adaptive_subsets", self.adaptive_subsets),
         ] {
-            if v > 5000 {
-                return Err(format!("fit.{key} must be <= 5000 (got {v})"));
+            if v > 1000 {
+                return Err(format!("fit.{key} must be <= 1000 (got {v})"));
             }
         }
         Ok(())
