@@ -62,7 +62,7 @@ pub(crate) fn fit(
     )
     .iter()
     .map(|e| {
-        let p = pts.to_px(e);
+        let p = pts.normalised_to_px(e);
         [p.cx, p.cy, p.a, p.b, p.theta]
     })
     .collect();
@@ -70,7 +70,7 @@ pub(crate) fn fit(
     let clusters = agglomerate(&set, eq8, cfg.algorithm1_cluster_threshold);
     let best = clusters.first().ok_or(FitError::NoEllipse)?;
     let [cx, cy, a, b, theta] = best.centre;
-    let m_star = pts.from_px(&Ellipse::new(cx, cy, a, b, theta));
+    let m_star = pts.px_to_normalised(&Ellipse::new(cx, cy, a, b, theta));
     if !(m_star.a > 0.0 && m_star.b > 0.0) {
         return Err(FitError::NoEllipse);
     }

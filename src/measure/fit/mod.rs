@@ -173,8 +173,8 @@ impl FitConfig {
             ("algorithm1_subsets", self.algorithm1_subsets),
             ("adaptive_subsets", self.adaptive_subsets),
         ] {
-            if v > 5000 {
-                return Err(format!("fit.{key} must be <= 5000 (got {v})"));
+            if v > 1000 {
+                return Err(format!("fit.{key} must be <= 1000 (got {v})"));
             }
         }
         Ok(())
@@ -307,7 +307,7 @@ impl Points {
     }
 
     /// An ellipse in normalised coordinates, in pixels.
-    pub fn to_px(&self, e: &Ellipse) -> Ellipse {
+    pub fn normalised_to_px(&self, e: &Ellipse) -> Ellipse {
         Ellipse {
             cx: e.cx * self.scale + self.mean[0],
             cy: e.cy * self.scale + self.mean[1],
@@ -318,7 +318,7 @@ impl Points {
     }
 
     /// An ellipse in pixels, in normalised coordinates.
-    pub fn from_px(&self, e: &Ellipse) -> Ellipse {
+    pub fn px_to_normalised(&self, e: &Ellipse) -> Ellipse {
         Ellipse {
             cx: (e.cx - self.mean[0]) / self.scale,
             cy: (e.cy - self.mean[1]) / self.scale,
@@ -330,11 +330,11 @@ impl Points {
 
     /// The caller-facing result of a fit in normalised coordinates.
     fn result(&self, e: &Ellipse, inliers_n: &[bool]) -> Result<FitResult, FitError> {
-        let ellipse = self.to_px(e);
+        let ellipse = self.normalised_to_px(e);
         let finite = [ellipse.cx, ellipse.cy, ellipse.a, ellipse.b, ellipse.theta]
             .iter()
             .all(|v| v.is_finite());
-        if !finite || !(ellipse.b > 0.0) {
+        if !finite || ellipse.b <= 0.0 {
             return Err(FitError::NoEllipse);
         }
         let mut inliers = vec![false; self.total];

@@ -8,7 +8,7 @@
 
 use crate::measure::ellipse::Ellipse;
 use rand::Rng;
-use std::f64::consts::TAU;
+use std::f64::consts::{FRAC_PI_2, TAU};
 
 /// What replaces the hidden part of the rim.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -258,7 +258,7 @@ pub fn random_spec(sc: &Scenario, rng: &mut impl Rng) -> RimSpec {
     };
     let a = uniform(rng, (sc.major_px.0.ln(), sc.major_px.1.ln())).exp();
     let b = a * uniform(rng, sc.axis_ratio);
-    let theta = uniform(rng, (-1.5707, 1.5707));
+    let theta = uniform(rng, (-FRAC_PI_2, FRAC_PI_2));
     let cx = uniform(rng, (100.0, 1180.0));
     let cy = uniform(rng, (100.0, 860.0));
     let perimeter = TAU * ((a * a + b * b) / 2.0).sqrt();

@@ -7,7 +7,7 @@
 
 use super::least_squares::conic_to_ellipse;
 use crate::measure::ellipse::{Conic, Ellipse};
-use nalgebra::Matrix5;
+use nalgebra::{Matrix5, Matrix6, Vector6};
 
 /// Taubin's ellipse of the selected points (normalised coordinates), or
 /// `None` for degenerate data or a non-ellipse.
@@ -32,34 +32,25 @@ pub(crate) fn fit_ellipse(points: &[[f64; 2]], keep: Option<&[bool]>) -> Option<
     let nf = n as f64;
     let (mx, my) = (mx / nf, my / nf);
     // Moments of z = [x^2, xy, y^2, x, y, 1] over centred data.
-    let mut m = [[0.0f64; 6]; 6];
+    let mut moments = Matrix6::<f64>::zeros();
     for p in selected() {
         let (x, y) = (p[0] - mx, p[1] - my);
-        let z = [x * x, x * y, y * y, x, y, 1.0];
-        for i in 0..6 {
-            for j in i..6 {
-                m[i][j] += z[i] * z[j];
-            }
-        }
+        let z = Vector6::new(x * x, x * y, y * y, x, y, 1.0);
+        moments.ger(1.0 / nf, &z, &z, 1.0);
     }
-    for i in 0..6 {
-        for j in i..6 {
-            m[i][j] /= nf;
-            m[j][i] = m[i][j];
-        }
-    }
+    let m = |i: usize, j: usize| moments[(i, j)];
     // P: moments with F eliminated (F = -(A zxx + B zxy + C zyy)).
     let mut p = Matrix5::<f64>::zeros();
     for i in 0..5 {
         for j in 0..5 {
             p[(i, j)] = if i < 3 && j < 3 {
-                m[i][j] - m[i][5] * m[j][5]
+                m(i, j) - m(i, 5) * m(j, 5)
             } else {
-                m[i][j]
+                m(i, j)
             };
         }
     }
-    let (sxx, sxy, syy) = (m[0][5], m[1][5], m[2][5]);
+    let (sxx, sxy, syy) = (m(0, 5), m(1, 5), m(2, 5));
     #[rustfmt::skip]
     let q = Matrix5::new(
         4.0 * sxx, 2.0 * sxy, 0.0, 0.0, 0.0,
@@ -75,7 +66,7 @@ pub(crate) fn fit_ellipse(points: &[[f64; 2]], keep: Option<&[bool]>) -> Option<
     let chol = q.cholesky()?;
     let l = chol.l();
     let l_inv = l.try_inverse()?;
-    let c = &l_inv * p * l_inv.transpose();
+    let c = l_inv * p * l_inv.transpose();
     let c = (c + c.transpose()) * 0.5;
     let eig = c.try_symmetric_eigen(1.0e-14, 200)?;
     let (k, _) = eig
