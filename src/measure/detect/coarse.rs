@@ -304,7 +304,10 @@ mod tests {
         assert_eq!(blobs.len(), 1);
         let b = &blobs[0];
         assert!((b.centre_px[0] - cx).abs() < 1.5 && (b.centre_px[1] - cy).abs() < 1.5);
-        assert!((b.a_px - r).abs() < 3.0 && (b.b_px - r).abs() < 3.0, "{b:?}");
+        assert!(
+            (b.a_px - r).abs() < 3.0 && (b.b_px - r).abs() < 3.0,
+            "{b:?}"
+        );
     }
 
     #[test]

@@ -16,6 +16,8 @@
 mod coarse;
 pub mod conic_fit;
 pub mod rim;
+#[cfg(test)]
+mod tests;
 
 use super::ellipse::Ellipse;
 use crate::camera::CameraModel;
@@ -216,7 +218,10 @@ impl Detector {
             for (j, seed) in seeds.iter().enumerate() {
                 let r = self.verify_seed(image, seed, 2 * i as u64 + j as u64);
                 if std::env::var_os("DETECT_DEBUG").is_some() {
-                    eprintln!("seed {seed:?} -> {:?}", r.as_ref().map(|v| (v.ellipse, v.score)));
+                    eprintln!(
+                        "seed {seed:?} -> {:?}",
+                        r.as_ref().map(|v| (v.ellipse, v.score))
+                    );
                 }
                 if let Some(v) = r {
                     if best.as_ref().is_none_or(|bv| v.score > bv.score) {
@@ -241,7 +246,8 @@ impl Detector {
             let dir = [phi.cos(), phi.sin()];
             let s_max = seed.reach * r + 4.0;
             rim::profile(image, c, dir, 1.0, s_max, 0.5, &mut self.profile);
-            if let Some(e) = rim::strongest_rise(&self.profile, 1.0, 0.5, self.cfg.min_contrast_gray as f32)
+            if let Some(e) =
+                rim::strongest_rise(&self.profile, 1.0, 0.5, self.cfg.min_contrast_gray as f32)
             {
                 let p = [c[0] + e.s * dir[0], c[1] + e.s * dir[1]];
                 points.push(self.camera.undistort_px(p));
@@ -252,19 +258,22 @@ impl Detector {
         }
         let scale = seed.b_px.max(1.0);
         let tolerance = (0.03 * scale).max(1.0);
-        let first = conic_fit::refine(&conic_fit::fit_ellipse(&points)?, &points, 3.0 * tolerance, 1)
-            .and_then(|e| conic_fit::refine(&e, &points, tolerance, 2))
-            .filter(|e| {
-                let c = e.to_conic();
-                let n = points
-                    .iter()
-                    .filter(|p| c.sampson_distance(p[0], p[1]) <= tolerance)
-                    .count();
-                n as f64 >= 0.8 * points.len() as f64
-            })
-            .or_else(|| {
-                conic_fit::ransac_ellipse(&points, tolerance, 150, self.cfg.seed ^ index)
-            })?;
+        let first = conic_fit::refine(
+            &conic_fit::fit_ellipse(&points)?,
+            &points,
+            3.0 * tolerance,
+            1,
+        )
+        .and_then(|e| conic_fit::refine(&e, &points, tolerance, 2))
+        .filter(|e| {
+            let c = e.to_conic();
+            let n = points
+                .iter()
+                .filter(|p| c.sampson_distance(p[0], p[1]) <= tolerance)
+                .count();
+            n as f64 >= 0.8 * points.len() as f64
+        })
+        .or_else(|| conic_fit::ransac_ellipse(&points, tolerance, 150, self.cfg.seed ^ index))?;
         if !self.plausible(&first, 0.5) {
             return None;
         }
@@ -290,7 +299,12 @@ impl Detector {
 
     /// Narrow ray pass around an ellipse (undistorted pixels), robust refit,
     /// and the evidence score.
-    fn verify_near(&mut self, image: &GrayImage, start: &Ellipse, tracked: bool) -> Option<Verified> {
+    fn verify_near(
+        &mut self,
+        image: &GrayImage,
+        start: &Ellipse,
+        tracked: bool,
+    ) -> Option<Verified> {
         let centre = self.camera.distort_px([start.cx, start.cy]);
         let perimeter = TAU * ((start.a * start.a + start.b * start.b) / 2.0).sqrt();
         let rays = ((perimeter / self.cfg.rim_point_spacing_px.max(0.1)) as usize)
@@ -302,6 +316,7 @@ impl Detector {
         let mut points_px = Vec::with_capacity(rays);
         let mut undistorted = Vec::with_capacity(rays);
         let mut contrasts = Vec::with_capacity(rays);
+        let mut darks_all = Vec::with_capacity(rays);
         let mut dirs = Vec::with_capacity(rays);
         let mut rays_in_image = 0usize;
         for k in 0..rays {
@@ -322,6 +337,7 @@ impl Detector {
                 points_px.push(p);
                 undistorted.push(self.camera.undistort_px(p));
                 contrasts.push(f64::from(e.light - e.dark));
+                darks_all.push(f64::from(e.dark));
                 dirs.push((dir, e.s));
             }
         }
@@ -337,13 +353,23 @@ impl Detector {
         }
         let mut residuals = Vec::new();
         conic_fit::residuals(&ellipse, &undistorted, &mut residuals);
-        let inliers: Vec<usize> = (0..residuals.len()).filter(|&i| residuals[i] <= tol).collect();
+        let inliers: Vec<usize> = (0..residuals.len())
+            .filter(|&i| residuals[i] <= tol)
+            .collect();
         if inliers.len() < self.cfg.min_rim_points as usize {
             return None;
         }
         let mut inlier_contrast: Vec<f64> = inliers.iter().map(|&i| contrasts[i]).collect();
         let rim_contrast = median(&mut inlier_contrast);
         if rim_contrast < self.cfg.min_contrast_gray {
+            return None;
+        }
+        // Dark inside: one dark surface (shaded, but far less than the
+        // rim's step), not a patchwork that happens to have edges on an ellipse.
+        let mut darks: Vec<f64> = inliers.iter().map(|&i| darks_all[i]).collect();
+        darks.sort_by(f64::total_cmp);
+        let (q1, q3) = (darks[darks.len() / 4], darks[3 * darks.len() / 4]);
+        if q3 - q1 > 0.25 * rim_contrast {
             return None;
         }
         let shape = inliers.len() as f64 / rays_in_image as f64;
@@ -368,8 +394,15 @@ impl Detector {
                 seen += 1;
             }
         }
-        let canopy = if looked > 0 { seen as f64 / looked as f64 } else { 0.0 };
-        if looked >= 8 && ellipse.a >= self.cfg.canopy_required_from_px && canopy < self.cfg.min_canopy_fraction {
+        let canopy = if looked > 0 {
+            seen as f64 / looked as f64
+        } else {
+            0.0
+        };
+        if looked >= 8
+            && ellipse.a >= self.cfg.canopy_required_from_px
+            && canopy < self.cfg.min_canopy_fraction
+        {
             return None;
         }
         let w = self.cfg.canopy_weight.clamp(0.0, 1.0);

@@ -139,17 +139,21 @@ pub fn has_outer_band(p: &[f32], min_dip: f32, max_width: usize) -> bool {
     if n < 5 {
         return false;
     }
-    let (k_min, v_min) = p
-        .iter()
-        .enumerate()
-        .fold((0, f32::MAX), |(kb, vb), (k, &v)| if v < vb { (k, v) } else { (kb, vb) });
+    let (k_min, v_min) =
+        p.iter().enumerate().fold(
+            (0, f32::MAX),
+            |(kb, vb), (k, &v)| if v < vb { (k, v) } else { (kb, vb) },
+        );
     if k_min == 0 || k_min + 1 >= n {
         return false;
     }
     let left_lo = k_min.saturating_sub(max_width);
     let right_hi = (k_min + max_width).min(n - 1);
     let left = p[left_lo..k_min].iter().copied().fold(f32::MIN, f32::max);
-    let right = p[k_min + 1..=right_hi].iter().copied().fold(f32::MIN, f32::max);
+    let right = p[k_min + 1..=right_hi]
+        .iter()
+        .copied()
+        .fold(f32::MIN, f32::max);
     left.min(right) - v_min >= min_dip
 }
 
