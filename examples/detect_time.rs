@@ -18,6 +18,11 @@ fn main() {
         }
         let full = t.elapsed().as_secs_f64() / 20.0 * 1e3;
         let h = r.as_ref().map(|c| c.ellipse_px);
+        println!(
+            "full: {:?}",
+            r.as_ref()
+                .map(|c| (c.ellipse_px, c.score, c.rim_points_px.len()))
+        );
         let t = Instant::now();
         for _ in 0..20 {
             r = d.detect(&img, h.as_ref());
@@ -25,7 +30,7 @@ fn main() {
         let tr = t.elapsed().as_secs_f64() / 20.0 * 1e3;
         println!(
             "{f}: full {full:.3} ms tracked {tr:.3} ms {:?}",
-            r.map(|c| c.rim_points_px.len())
+            r.map(|c| (c.ellipse_px, c.score, c.rim_points_px.len()))
         );
     }
 }

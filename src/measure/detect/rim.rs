@@ -17,8 +17,9 @@ pub fn sample(img: &GrayImage, u: f64, v: f64) -> Option<f32> {
     if w < 2 || h < 2 || !(u >= 0.0 && v >= 0.0 && u <= (w - 1) as f64 && v <= (h - 1) as f64) {
         return None;
     }
-    let x0 = (u.floor() as usize).min(w - 2);
-    let y0 = (v.floor() as usize).min(h - 2);
+    // Truncation is floor here: u, v >= 0.
+    let x0 = (u as usize).min(w - 2);
+    let y0 = (v as usize).min(h - 2);
     let raw = img.as_raw();
     let (fx, fy) = ((u - x0 as f64) as f32, (v - y0 as f64) as f32);
     let i = y0 * w + x0;
