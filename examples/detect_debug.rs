@@ -11,6 +11,9 @@ fn main() {
     for f in &args[2..] {
         let img = read_gray8(Path::new(f)).unwrap();
         let r = d.detect(&img, None);
-        println!("{f}: {:?}", r.map(|c| (c.ellipse_px, c.score, c.rim_points_px.len())));
+        println!(
+            "{f}: {:?}",
+            r.map(|c| (c.ellipse_px, c.score, c.rim_points_px.len()))
+        );
     }
 }

@@ -142,7 +142,10 @@ fn reference_sets() {
             let expect = t["expect"].as_str().unwrap();
             let path = dir.join(frame);
             let Ok(image) = read_gray8(&path) else {
-                assert!(expect != "detect", "{set}/{frame}: unreadable but expect detect");
+                assert!(
+                    expect != "detect",
+                    "{set}/{frame}: unreadable but expect detect"
+                );
                 continue;
             };
             let found = detector.detect(&image, None);

@@ -75,6 +75,14 @@ pub struct Blob {
     /// merges with it.
     pub core_px: [f64; 2],
     pub core_radius_px: f64,
+    /// The point of the region's medial ridge best surrounded by light (a
+    /// disc with a probe as wide as itself merged into it has no deepest
+    /// point of its own, but its centre is still ringed by the light
+    /// canopy), its inscribed radius, full-res pixels, and the light share
+    /// of the ring around it (0 when the region has no ridge).
+    pub ringed_px: [f64; 2],
+    pub ringed_radius_px: f64,
+    pub ringed_light: f64,
 }
 
 /// The level below which `fraction` of the pixels lie.
@@ -103,7 +111,11 @@ pub struct BlobFinder {
     /// Per label: index into the output, and the deepest pixel.
     label_out: Vec<Option<usize>>,
     deepest: Vec<(u32, usize)>,
+    ringed: Vec<(f64, u32, usize)>,
 }
+
+/// Directions of the ring test around ridge points.
+const RING_SAMPLES: usize = 24;
 
 impl BlobFinder {
     /// Dark regions at each threshold fraction between the darkest level and
@@ -206,6 +218,9 @@ impl BlobFinder {
                 fill: nf / (std::f64::consts::PI * a * b),
                 core_px: [0.0; 2],
                 core_radius_px: 0.0,
+                ringed_px: [0.0; 2],
+                ringed_radius_px: 0.0,
+                ringed_light: 0.0,
             });
         }
         if out.len() > first_out {
@@ -272,7 +287,72 @@ impl BlobFinder {
                 }
             }
         }
+        // Ridge points (a local maximum of the distance across the region in
+        // at least one direction) and the light share of a ring just
+        // outside their inscribed circle.
+        self.ringed.clear();
+        self.ringed.resize(out.len() - first_out, (0.0, 0, 0));
+        let ring: Vec<(f64, f64)> = (0..RING_SAMPLES)
+            .map(|k| (std::f64::consts::TAU * k as f64 / RING_SAMPLES as f64).sin_cos())
+            .collect();
+        for y in 1..h.saturating_sub(1) {
+            for x in 1..w - 1 {
+                let i = y * w + x;
+                let di = d[i];
+                if di < 6 {
+                    continue;
+                }
+                let Some(Some(o)) = self.label_out.get(labels[i] as usize) else {
+                    continue;
+                };
+                // Only the thick parts: the disc is among its region's
+                // thickest (thin hose ends are ringed by light too).
+                if 2 * di < self.deepest[o - first_out].0 {
+                    continue;
+                }
+                let ridge =
+                    [(1, w), (w, 1), (w + 1, w - 1), (w - 1, w + 1)]
+                        .iter()
+                        .any(|&(a, b)| {
+                            di >= d[i - a]
+                                && di >= d[i + b]
+                                && di >= d[i + a]
+                                && di >= d[i - b]
+                                && (di > d[i - a] || di > d[i + a])
+                        });
+                if !ridge {
+                    continue;
+                }
+                let rho = f64::from(di) / 3.0 * 1.25 + 1.0;
+                let (mut seen, mut light) = (0usize, 0usize);
+                for &(sn, cs) in &ring {
+                    let (u, v) = (x as f64 + rho * cs, y as f64 + rho * sn);
+                    if u < 0.0 || v < 0.0 || u >= w as f64 || v >= h as f64 {
+                        continue;
+                    }
+                    seen += 1;
+                    if labels[v as usize * w + u as usize] == 0 {
+                        light += 1;
+                    }
+                }
+                // Outside the image counts as not light: the image border
+                // cuts probes and clouds, and is no evidence of a canopy.
+                if seen * 5 < RING_SAMPLES * 4 {
+                    continue;
+                }
+                let share = light as f64 / RING_SAMPLES as f64;
+                let slot = &mut self.ringed[o - first_out];
+                if share > slot.0 || (share == slot.0 && di > slot.1) {
+                    *slot = (share, di, i);
+                }
+            }
+        }
         let f = img.factor as f64;
+        for (blob, &(share, dist, i)) in out[first_out..].iter_mut().zip(&self.ringed) {
+            blob.ringed_light = share;
+            blob.ringed_px = img.to_full((i % w) as f64, (i / w) as f64);
+            blob.ringed_radius_px = ((f64::from(dist) / 3.0) - 0.5).max(0.5) * f;
+        }
         for (blob, &(dist, i)) in out[first_out..].iter_mut().zip(&self.deepest) {
             blob.core_px = img.to_full((i % w) as f64, (i / w) as f64);
             // Chamfer units are 3 per pixel; the distance counts to the
@@ -304,7 +384,10 @@ mod tests {
         assert_eq!(blobs.len(), 1);
         let b = &blobs[0];
         assert!((b.centre_px[0] - cx).abs() < 1.5 && (b.centre_px[1] - cy).abs() < 1.5);
-        assert!((b.a_px - r).abs() < 3.0 && (b.b_px - r).abs() < 3.0, "{b:?}");
+        assert!(
+            (b.a_px - r).abs() < 3.0 && (b.b_px - r).abs() < 3.0,
+            "{b:?}"
+        );
     }
 
     #[test]

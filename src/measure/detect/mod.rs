@@ -16,6 +16,8 @@
 mod coarse;
 pub mod conic_fit;
 pub mod rim;
+#[cfg(test)]
+mod tests;
 
 use super::ellipse::Ellipse;
 use crate::camera::CameraModel;
@@ -46,6 +48,10 @@ pub struct DetectConfig {
     pub rim_point_spacing_px: f64,
     /// Most rim points per frame.
     pub max_rim_points: u32,
+    /// Half-width of the narrow rim search around a candidate ellipse, as a
+    /// fraction of its radius, and at most this many pixels.
+    pub rim_search_fraction: f64,
+    pub rim_search_max_px: f64,
     /// Fewest rim points on the ellipse for a detection.
     pub min_rim_points: u32,
     /// Edge distance from the candidate's ellipse counted as "on the rim", pixels.
@@ -59,6 +65,8 @@ pub struct DetectConfig {
     pub canopy_required_from_px: f64,
     /// Smallest share of rim rays showing the canopy band, when required.
     pub min_canopy_fraction: f64,
+    /// A candidate this good ends the search (the rest are not verified).
+    pub accept_score: f64,
     /// Smallest score (0..1) for a detection.
     pub min_score: f64,
     /// Seed of the random sampling (the detection is deterministic).
@@ -181,8 +189,12 @@ impl Detector {
         let mut kept: Vec<Blob> = Vec::new();
         for b in blobs.drain(..) {
             let dup = kept.iter().any(|k| {
-                let d = (k.centre_px[0] - b.centre_px[0]).hypot(k.centre_px[1] - b.centre_px[1]);
-                d < 0.25 * k.b_px.min(b.b_px) && (k.a_px / b.a_px - 1.0).abs() < 0.25
+                let near = |p: [f64; 2], q: [f64; 2], r: f64| (p[0] - q[0]).hypot(p[1] - q[1]) < r;
+                let r = 0.25 * k.b_px.min(b.b_px);
+                near(k.centre_px, b.centre_px, r)
+                    && near(k.core_px, b.core_px, r)
+                    && near(k.ringed_px, b.ringed_px, r)
+                    && (k.a_px / b.a_px - 1.0).abs() < 0.25
             });
             if !dup {
                 kept.push(b);
@@ -213,16 +225,42 @@ impl Detector {
                     reach: 3.0,
                 });
             }
+            let off = (b.ringed_px[0] - b.centre_px[0]).hypot(b.ringed_px[1] - b.centre_px[1]);
+            let off_core = (b.ringed_px[0] - b.core_px[0]).hypot(b.ringed_px[1] - b.core_px[1]);
+            if b.ringed_light >= 0.5
+                && off > 0.3 * b.ringed_radius_px
+                && off_core > 0.3 * b.ringed_radius_px
+            {
+                seeds.push(Seed {
+                    centre_px: b.ringed_px,
+                    a_px: b.ringed_radius_px,
+                    b_px: b.ringed_radius_px,
+                    theta: 0.0,
+                    reach: 3.0,
+                });
+            }
             for (j, seed) in seeds.iter().enumerate() {
-                let r = self.verify_seed(image, seed, 2 * i as u64 + j as u64);
+                let r = self.verify_seed(image, seed, 3 * i as u64 + j as u64);
                 if std::env::var_os("DETECT_DEBUG").is_some() {
-                    eprintln!("seed {seed:?} -> {:?}", r.as_ref().map(|v| (v.ellipse, v.score)));
+                    eprintln!(
+                        "seed {seed:?} ring {:.2} {:?} {:.1} -> {:?}",
+                        b.ringed_light,
+                        b.ringed_px,
+                        b.ringed_radius_px,
+                        r.as_ref().map(|v| (v.ellipse, v.score))
+                    );
                 }
                 if let Some(v) = r {
                     if best.as_ref().is_none_or(|bv| v.score > bv.score) {
                         best = Some(v);
                     }
                 }
+            }
+            if best
+                .as_ref()
+                .is_some_and(|v| v.score >= self.cfg.accept_score)
+            {
+                break;
             }
         }
         self.blobs = kept;
@@ -235,24 +273,39 @@ impl Detector {
         let rays = 64;
         let mut points = Vec::with_capacity(rays);
         let c = seed.centre_px;
+        // The disc's axis ratio is at least min_axis_ratio: an elongated
+        // region (disc plus hose or probe) is not searched along its length.
+        let longest = seed.b_px / self.cfg.min_axis_ratio.clamp(0.05, 1.0);
         for k in 0..rays {
             let phi = TAU * k as f64 / rays as f64;
-            let r = polar_radius(seed.a_px, seed.b_px, seed.theta, phi);
+            let r = polar_radius(seed.a_px, seed.b_px, seed.theta, phi).min(longest);
             let dir = [phi.cos(), phi.sin()];
             let s_max = seed.reach * r + 4.0;
-            rim::profile(image, c, dir, 1.0, s_max, 0.5, &mut self.profile);
-            if let Some(e) = rim::strongest_rise(&self.profile, 1.0, 0.5, self.cfg.min_contrast_gray as f32)
+            // About a pixel of accuracy is enough here: coarser steps on
+            // large seeds.
+            let step = (r / 60.0).clamp(0.5, 1.0);
+            rim::profile(image, c, dir, 1.0, s_max, step, &mut self.profile);
+            if let Some(e) =
+                rim::strongest_rise(&self.profile, 1.0, step, self.cfg.min_contrast_gray as f32)
             {
                 let p = [c[0] + e.s * dir[0], c[1] + e.s * dir[1]];
                 points.push(self.camera.undistort_px(p));
             }
         }
         if points.len() < 8 {
-            return None;
+            {
+                if std::env::var_os("DETECT_DEBUG").is_some() {
+                    eprintln!("reject at line 275");
+                }
+                return None;
+            }
         }
         let scale = seed.b_px.max(1.0);
         let tolerance = (0.03 * scale).max(1.0);
-        let first = conic_fit::refine(&conic_fit::fit_ellipse(&points)?, &points, 3.0 * tolerance, 1)
+        // Most rays on the rim: a trimmed least-squares fit will do; else
+        // RANSAC (a hose or probe merged with the disc).
+        let first = conic_fit::fit_ellipse(&points)
+            .and_then(|e| conic_fit::refine(&e, &points, 3.0 * tolerance, 1))
             .and_then(|e| conic_fit::refine(&e, &points, tolerance, 2))
             .filter(|e| {
                 let c = e.to_conic();
@@ -266,7 +319,12 @@ impl Detector {
                 conic_fit::ransac_ellipse(&points, tolerance, 150, self.cfg.seed ^ index)
             })?;
         if !self.plausible(&first, 0.5) {
-            return None;
+            {
+                if std::env::var_os("DETECT_DEBUG").is_some() {
+                    eprintln!("reject at line 296");
+                }
+                return None;
+            }
         }
         let mut v = self.verify_near(image, &first, false)?;
         // A centre that moved a lot (the first pass started off the disc):
@@ -290,7 +348,12 @@ impl Detector {
 
     /// Narrow ray pass around an ellipse (undistorted pixels), robust refit,
     /// and the evidence score.
-    fn verify_near(&mut self, image: &GrayImage, start: &Ellipse, tracked: bool) -> Option<Verified> {
+    fn verify_near(
+        &mut self,
+        image: &GrayImage,
+        start: &Ellipse,
+        tracked: bool,
+    ) -> Option<Verified> {
         let centre = self.camera.distort_px([start.cx, start.cy]);
         let perimeter = TAU * ((start.a * start.a + start.b * start.b) / 2.0).sqrt();
         let rays = ((perimeter / self.cfg.rim_point_spacing_px.max(0.1)) as usize)
@@ -302,12 +365,14 @@ impl Detector {
         let mut points_px = Vec::with_capacity(rays);
         let mut undistorted = Vec::with_capacity(rays);
         let mut contrasts = Vec::with_capacity(rays);
+        let mut darks_all = Vec::with_capacity(rays);
         let mut dirs = Vec::with_capacity(rays);
         let mut rays_in_image = 0usize;
         for k in 0..rays {
             let phi = TAU * k as f64 / rays as f64;
             let r = polar_radius(start.a, start.b, start.theta, phi);
-            let margin = (0.2 * r).clamp(4.0, 30.0);
+            let margin =
+                (self.cfg.rim_search_fraction * r).clamp(4.0, self.cfg.rim_search_max_px.max(4.0));
             let dir = [phi.cos(), phi.sin()];
             let (s0, s1) = ((r - margin).max(0.5), r + margin);
             let far = [centre[0] + s1 * dir[0], centre[1] + s1 * dir[1]];
@@ -322,29 +387,65 @@ impl Detector {
                 points_px.push(p);
                 undistorted.push(self.camera.undistort_px(p));
                 contrasts.push(f64::from(e.light - e.dark));
+                darks_all.push(f64::from(e.dark));
                 dirs.push((dir, e.s));
             }
         }
         if rays_in_image < rays / 4 || undistorted.len() < self.cfg.min_rim_points as usize {
-            return None;
+            {
+                if std::env::var_os("DETECT_DEBUG").is_some() {
+                    eprintln!("reject at line 364");
+                }
+                return None;
+            }
         }
         let tol = self.cfg.inlier_tolerance_px.max(0.1);
         let coarse_tol = (0.05 * start.b).max(3.0 * tol);
         let ellipse = conic_fit::refine(start, &undistorted, coarse_tol, 2)
             .and_then(|e| conic_fit::refine(&e, &undistorted, tol, 2))?;
         if !self.plausible(&ellipse, 1.0) {
-            return None;
+            {
+                if std::env::var_os("DETECT_DEBUG").is_some() {
+                    eprintln!("reject at line 371");
+                }
+                return None;
+            }
         }
         let mut residuals = Vec::new();
         conic_fit::residuals(&ellipse, &undistorted, &mut residuals);
-        let inliers: Vec<usize> = (0..residuals.len()).filter(|&i| residuals[i] <= tol).collect();
+        let inliers: Vec<usize> = (0..residuals.len())
+            .filter(|&i| residuals[i] <= tol)
+            .collect();
         if inliers.len() < self.cfg.min_rim_points as usize {
-            return None;
+            {
+                if std::env::var_os("DETECT_DEBUG").is_some() {
+                    eprintln!("reject at line 379");
+                }
+                return None;
+            }
         }
         let mut inlier_contrast: Vec<f64> = inliers.iter().map(|&i| contrasts[i]).collect();
         let rim_contrast = median(&mut inlier_contrast);
         if rim_contrast < self.cfg.min_contrast_gray {
-            return None;
+            {
+                if std::env::var_os("DETECT_DEBUG").is_some() {
+                    eprintln!("reject at line 384");
+                }
+                return None;
+            }
+        }
+        // Dark inside: one dark surface (shaded, but far less than the
+        // rim's step), not a patchwork that happens to have edges on an ellipse.
+        let mut darks: Vec<f64> = inliers.iter().map(|&i| darks_all[i]).collect();
+        darks.sort_by(f64::total_cmp);
+        let (q1, q3) = (darks[darks.len() / 4], darks[3 * darks.len() / 4]);
+        if q3 - q1 > 0.25 * rim_contrast {
+            {
+                if std::env::var_os("DETECT_DEBUG").is_some() {
+                    eprintln!("reject at line 392");
+                }
+                return None;
+            }
         }
         let shape = inliers.len() as f64 / rays_in_image as f64;
 
@@ -368,15 +469,32 @@ impl Detector {
                 seen += 1;
             }
         }
-        let canopy = if looked > 0 { seen as f64 / looked as f64 } else { 0.0 };
-        if looked >= 8 && ellipse.a >= self.cfg.canopy_required_from_px && canopy < self.cfg.min_canopy_fraction {
-            return None;
+        let canopy = if looked > 0 {
+            seen as f64 / looked as f64
+        } else {
+            0.0
+        };
+        if looked >= 8
+            && ellipse.a >= self.cfg.canopy_required_from_px
+            && canopy < self.cfg.min_canopy_fraction
+        {
+            {
+                if std::env::var_os("DETECT_DEBUG").is_some() {
+                    eprintln!("reject at line 425");
+                }
+                return None;
+            }
         }
         let w = self.cfg.canopy_weight.clamp(0.0, 1.0);
         let score = (shape * ((1.0 - w) + w * canopy)).clamp(0.0, 1.0);
         let _ = tracked;
         if score < self.cfg.min_score {
-            return None;
+            {
+                if std::env::var_os("DETECT_DEBUG").is_some() {
+                    eprintln!("reject at line 431");
+                }
+                return None;
+            }
         }
         // Keep the points near the ellipse: the probe and hose outlines are
         // the fit's outliers, and fewer of them is better.

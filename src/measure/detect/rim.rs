@@ -17,8 +17,9 @@ pub fn sample(img: &GrayImage, u: f64, v: f64) -> Option<f32> {
     if w < 2 || h < 2 || !(u >= 0.0 && v >= 0.0 && u <= (w - 1) as f64 && v <= (h - 1) as f64) {
         return None;
     }
-    let x0 = (u.floor() as usize).min(w - 2);
-    let y0 = (v.floor() as usize).min(h - 2);
+    // Truncation is floor here: u, v >= 0.
+    let x0 = (u as usize).min(w - 2);
+    let y0 = (v as usize).min(h - 2);
     let raw = img.as_raw();
     let (fx, fy) = ((u - x0 as f64) as f32, (v - y0 as f64) as f32);
     let i = y0 * w + x0;
@@ -139,17 +140,21 @@ pub fn has_outer_band(p: &[f32], min_dip: f32, max_width: usize) -> bool {
     if n < 5 {
         return false;
     }
-    let (k_min, v_min) = p
-        .iter()
-        .enumerate()
-        .fold((0, f32::MAX), |(kb, vb), (k, &v)| if v < vb { (k, v) } else { (kb, vb) });
+    let (k_min, v_min) =
+        p.iter().enumerate().fold(
+            (0, f32::MAX),
+            |(kb, vb), (k, &v)| if v < vb { (k, v) } else { (kb, vb) },
+        );
     if k_min == 0 || k_min + 1 >= n {
         return false;
     }
     let left_lo = k_min.saturating_sub(max_width);
     let right_hi = (k_min + max_width).min(n - 1);
     let left = p[left_lo..k_min].iter().copied().fold(f32::MIN, f32::max);
-    let right = p[k_min + 1..=right_hi].iter().copied().fold(f32::MIN, f32::max);
+    let right = p[k_min + 1..=right_hi]
+        .iter()
+        .copied()
+        .fold(f32::MIN, f32::max);
     left.min(right) - v_min >= min_dip
 }
 

@@ -1,0 +1,223 @@
+//! Detector tests on synthetic frames with exact truth: an anti-aliased dark
+//! ellipse inside a light canopy with a darker outer band, on a sky gradient,
+//! with sensor noise, optional blur, and occluders.
+
+use super::*;
+use crate::config::Config;
+use image::Luma;
+use nalgebra::Matrix3;
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+fn camera(w: u32, h: u32) -> CameraModel {
+    let k = Matrix3::new(
+        1336.2,
+        0.0,
+        w as f64 / 2.0,
+        0.0,
+        1335.4,
+        h as f64 / 2.0,
+        0.0,
+        0.0,
+        1.0,
+    );
+    CameraModel::new("test", w, h, k, [0.0; 5]).unwrap()
+}
+
+fn detector(cam: &CameraModel) -> Detector {
+    let cfg = Config::embedded();
+    Detector::new(&cfg.detect, cam, cfg.drogue.inner_radius_m)
+}
+
+/// Implicit "radius" of a point in an ellipse's frame: 1 on the ellipse.
+fn ellipse_level(e: &Ellipse, u: f64, v: f64) -> f64 {
+    let (s, c) = e.theta.sin_cos();
+    let (du, dv) = (u - e.cx, v - e.cy);
+    let (x, y) = (c * du + s * dv, -s * du + c * dv);
+    ((x / e.a).powi(2) + (y / e.b).powi(2)).sqrt()
+}
+
+/// A scene: returns the reflectance-like gray level at a point.
+struct Scene {
+    disc: Ellipse,
+    disc_level: f64,
+    canopy_level: f64,
+    band_level: f64,
+    /// Outer band from 2.1 to 2.2 times the disc (the canopy rim).
+    with_canopy: bool,
+    /// Occluding bar (probe): from `bar_from` toward +v (down), half-width.
+    bar: Option<([f64; 2], f64, f64)>,
+    rects: Vec<[f64; 4]>,
+}
+
+impl Scene {
+    fn new(disc: Ellipse) -> Self {
+        Self {
+            disc,
+            disc_level: 30.0,
+            canopy_level: 175.0,
+            band_level: 85.0,
+            with_canopy: true,
+            bar: None,
+            rects: Vec::new(),
+        }
+    }
+
+    fn level(&self, u: f64, v: f64) -> f64 {
+        if let Some((from, half_width, level)) = self.bar {
+            if v >= from[1] && (u - from[0]).abs() <= half_width {
+                return level;
+            }
+        }
+        for r in &self.rects {
+            if u >= r[0] && u <= r[2] && v >= r[1] && v <= r[3] {
+                return 25.0;
+            }
+        }
+        let k = ellipse_level(&self.disc, u, v);
+        if self.disc.a > 0.0 && k <= 1.0 {
+            self.disc_level
+        } else if self.with_canopy && k <= 2.1 {
+            self.canopy_level
+        } else if self.with_canopy && k <= 2.2 {
+            self.band_level
+        } else {
+            130.0 + 0.03 * v
+        }
+    }
+
+    /// Pixel-area average (8 x 8 samples) plus Gaussian noise.
+    fn render(&self, w: u32, h: u32, noise: f64, seed: u64) -> GrayImage {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        GrayImage::from_fn(w, h, |x, y| {
+            let (u, v) = (x as f64, y as f64);
+            let mut sum = 0.0;
+            for i in 0..8 {
+                for j in 0..8 {
+                    sum += self.level(
+                        u - 0.5 + (i as f64 + 0.5) / 8.0,
+                        v - 0.5 + (j as f64 + 0.5) / 8.0,
+                    );
+                }
+            }
+            // Box-Muller.
+            let (r1, r2): (f64, f64) = (rng.random::<f64>().max(1e-12), rng.random());
+            let n = noise * (-2.0 * r1.ln()).sqrt() * (std::f64::consts::TAU * r2).cos();
+            Luma([(sum / 64.0 + n).round().clamp(0.0, 255.0) as u8])
+        })
+    }
+}
+
+/// Plain least-squares ellipse of the rim points (no trimming), to test the
+/// points themselves.
+fn fit_points(c: &RimCandidate) -> Ellipse {
+    conic_fit::fit_ellipse(&c.rim_points_px).unwrap()
+}
+
+#[test]
+fn clean_disc_gives_subpixel_rim_points() {
+    let (w, h) = (400, 300);
+    let cam = camera(w, h);
+    let truth = Ellipse::new(201.37, 148.81, 48.3, 31.7, 0.52);
+    let img = Scene::new(truth).render(w, h, 2.0, 1);
+    let c = detector(&cam).detect(&img, None).expect("detected");
+    assert!(c.score > 0.8, "score {}", c.score);
+    assert!(c.rim_points_px.len() > 120);
+    let e = fit_points(&c);
+    assert!(truth.max_param_error_px(&e) < 0.05, "{e:?}");
+    assert!(truth.theta_error_rad(&e).to_degrees() < 0.2, "{e:?}");
+}
+
+#[test]
+fn probe_hiding_forty_percent_of_the_rim() {
+    let (w, h) = (400, 300);
+    let cam = camera(w, h);
+    let truth = Ellipse::new(190.6, 120.2, 50.0, 47.0, 0.1);
+    let mut scene = Scene::new(truth);
+    // A bar from below, as wide as the disc, reaching past its centre:
+    // it hides the lower ~40 % of the rim and merges with the disc.
+    scene.bar = Some(([190.6, 128.0], 46.0, 42.0));
+    let img = scene.render(w, h, 2.0, 2);
+    let c = detector(&cam).detect(&img, None).expect("detected");
+    let inliers: Vec<[f64; 2]> = {
+        let conic = truth.to_conic();
+        c.rim_points_px
+            .iter()
+            .copied()
+            .filter(|p| conic.sampson_distance(p[0], p[1]) < 0.5)
+            .collect()
+    };
+    assert!(inliers.len() as f64 >= 0.6 * c.rim_points_px.len() as f64);
+    let e = conic_fit::fit_ellipse(&inliers).unwrap();
+    assert!(truth.max_param_error_px(&e) < 0.15, "{e:?}");
+}
+
+#[test]
+fn small_far_disc_is_found() {
+    let (w, h) = (320, 240);
+    let cam = camera(w, h);
+    // 6 px radius: 0.15 m at about 33 m.
+    let truth = Ellipse::new(151.3, 97.6, 6.2, 5.6, 0.3);
+    let img = Scene::new(truth).render(w, h, 1.5, 3);
+    let c = detector(&cam).detect(&img, None).expect("detected");
+    let e = fit_points(&c);
+    assert!(truth.max_param_error_px(&e) < 0.15, "{e:?}");
+}
+
+#[test]
+fn dark_shapes_without_a_drogue_are_not_detected() {
+    let (w, h) = (400, 300);
+    let cam = camera(w, h);
+    let mut scene = Scene::new(Ellipse::new(0.0, 0.0, 0.0, 0.0, 0.0));
+    scene.with_canopy = false;
+    scene.rects = vec![
+        [40.0, 40.0, 160.0, 80.0],
+        [250.0, 150.0, 290.0, 190.0],
+        // A cross.
+        [100.0, 180.0, 180.0, 200.0],
+        [130.0, 150.0, 150.0, 230.0],
+    ];
+    let img = scene.render(w, h, 2.0, 4);
+    assert!(detector(&cam).detect(&img, None).is_none());
+}
+
+#[test]
+fn tracking_hint_is_used_and_a_wrong_hint_falls_back_to_the_full_search() {
+    let (w, h) = (400, 300);
+    let cam = camera(w, h);
+    let truth = Ellipse::new(220.4, 160.9, 40.0, 36.0, -0.4);
+    let img = Scene::new(truth).render(w, h, 2.0, 5);
+    let mut det = detector(&cam);
+    let near = Ellipse::new(222.0, 159.0, 42.0, 35.0, -0.3);
+    let c = det.detect(&img, Some(&near)).expect("tracked");
+    assert!(truth.max_param_error_px(&fit_points(&c)) < 0.05);
+    let wrong = Ellipse::new(60.0, 60.0, 20.0, 20.0, 0.0);
+    let c = det.detect(&img, Some(&wrong)).expect("full search");
+    assert!(truth.max_param_error_px(&fit_points(&c)) < 0.05);
+}
+
+#[test]
+fn hostile_frames_do_not_panic() {
+    let cam = camera(640, 480);
+    let mut det = detector(&cam);
+    let weird = Ellipse::new(f64::NAN, 1.0, 1e9, 0.0, 0.0);
+    let mut rng = ChaCha8Rng::seed_from_u64(6);
+    let frames = [
+        GrayImage::new(1, 1),
+        GrayImage::new(20000, 1),
+        GrayImage::new(1, 5000),
+        GrayImage::from_pixel(640, 480, Luma([0])),
+        GrayImage::from_pixel(640, 480, Luma([255])),
+        GrayImage::from_fn(640, 480, |_, _| Luma([rng.random::<u8>()])),
+        GrayImage::from_fn(640, 480, |x, _| Luma([if x % 2 == 0 { 0 } else { 255 }])),
+    ];
+    for (i, img) in frames.iter().enumerate() {
+        let found = det.detect(img, None);
+        assert!(
+            found.is_none(),
+            "frame {i}: {:?}",
+            found.map(|c| (c.ellipse_px, c.score))
+        );
+        let _ = det.detect(img, Some(&weird));
+    }
+}
