@@ -8,12 +8,15 @@ use nalgebra::Vector3;
 use std::path::PathBuf;
 
 fn reference_dir() -> Option<PathBuf> {
-    let dir = std::env::var_os("DROGUE_REFERENCE_DIR")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| {
-            PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/reference")
-        });
-    dir.is_dir().then_some(dir)
+    if let Some(dir) = std::env::var_os("DROGUE_REFERENCE_DIR") {
+        return Some(PathBuf::from(dir));
+    }
+    // Beside the repository (CI's layout), or beside a worktree folder.
+    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..");
+    ["../shared/data/reference", "../../shared/data/reference"]
+        .iter()
+        .map(|rel| root.join(rel))
+        .find(|d| d.is_dir())
 }
 
 fn v3(v: &serde_json::Value) -> Vector3<f64> {
