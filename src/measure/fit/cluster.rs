@@ -16,14 +16,19 @@ pub(crate) struct Cluster {
     pub count: usize,
 }
 
-/// Clusters `vectors` with `distance` until no two centres are closer than
-/// `threshold`. Returns the classes, biggest first (ties: lower index of
+/// Clusters `vectors` until no two centres are closer than `threshold`;
+/// `distance_sq` is the squared distance (NaN counts as infinitely far). Returns the classes, biggest first (ties: lower index of
 /// first member first, so the order is deterministic).
 pub(crate) fn agglomerate(
     vectors: &[[f64; 5]],
-    distance: impl Fn(&[f64; 5], &[f64; 5]) -> f64,
+    distance_sq: impl Fn(&[f64; 5], &[f64; 5]) -> f64,
     threshold: f64,
 ) -> Vec<Cluster> {
+    let distance_sq = |v: &[f64; 5], w: &[f64; 5]| {
+        let d = distance_sq(v, w);
+        if d.is_nan() { f64::INFINITY } else { d }
+    };
+    let threshold = threshold * threshold;
     let n = vectors.len();
     let mut clusters: Vec<Cluster> = vectors
         .iter()
@@ -37,8 +42,7 @@ pub(crate) fn agglomerate(
     let mut d = vec![f64::INFINITY; n * n];
     for i in 0..n {
         for j in (i + 1)..n {
-            let v = distance(&vectors[i], &vectors[j]);
-            let v = if v.is_nan() { f64::INFINITY } else { v };
+            let v = distance_sq(&vectors[i], &vectors[j]);
             d[i * n + j] = v;
             d[j * n + i] = v;
         }
@@ -77,8 +81,7 @@ pub(crate) fn agglomerate(
         // Row and column i from the new centre.
         for k in 0..n {
             if k != i && active[k] {
-                let v = distance(&clusters[i].centre, &clusters[k].centre);
-                let v = if v.is_nan() { f64::INFINITY } else { v };
+                let v = distance_sq(&clusters[i].centre, &clusters[k].centre);
                 d[i * n + k] = v;
                 d[k * n + i] = v;
             }
@@ -109,11 +112,7 @@ mod tests {
     use super::*;
 
     fn euclid(a: &[f64; 5], b: &[f64; 5]) -> f64 {
-        a.iter()
-            .zip(b)
-            .map(|(x, y)| (x - y) * (x - y))
-            .sum::<f64>()
-            .sqrt()
+        a.iter().zip(b).map(|(x, y)| (x - y) * (x - y)).sum::<f64>()
     }
 
     #[test]
