@@ -38,6 +38,8 @@ pub(crate) fn agglomerate(
         })
         .collect();
     let mut active = vec![true; n];
+    // Indices of the active classes (compact, so scans skip merged ones).
+    let mut alive: Vec<usize> = (0..n).collect();
     // Full symmetric distance matrix, and each row's nearest active column.
     let mut d = vec![f64::INFINITY; n * n];
     for i in 0..n {
@@ -47,20 +49,21 @@ pub(crate) fn agglomerate(
             d[j * n + i] = v;
         }
     }
-    let nearest_of = |d: &[f64], active: &[bool], i: usize| -> (usize, f64) {
+    let nearest_of = |d: &[f64], alive: &[usize], i: usize| -> (usize, f64) {
+        let row = &d[i * n..(i + 1) * n];
         let mut best = (usize::MAX, f64::INFINITY);
-        for j in 0..n {
-            if j != i && active[j] && d[i * n + j] < best.1 {
-                best = (j, d[i * n + j]);
+        for &j in alive {
+            if j != i && row[j] < best.1 {
+                best = (j, row[j]);
             }
         }
         best
     };
-    let mut nearest: Vec<(usize, f64)> = (0..n).map(|i| nearest_of(&d, &active, i)).collect();
+    let mut nearest: Vec<(usize, f64)> = (0..n).map(|i| nearest_of(&d, &alive, i)).collect();
     loop {
         let mut pick = (usize::MAX, f64::INFINITY);
-        for i in 0..n {
-            if active[i] && nearest[i].1 < pick.1 {
+        for &i in &alive {
+            if nearest[i].1 < pick.1 {
                 pick = (i, nearest[i].1);
             }
         }
@@ -78,21 +81,25 @@ pub(crate) fn agglomerate(
         clusters[i].centre = centre;
         clusters[i].count += clusters[j].count;
         active[j] = false;
+        if let Some(pos) = alive.iter().position(|&k| k == j) {
+            alive.remove(pos);
+        }
         // Row and column i from the new centre.
-        for k in 0..n {
-            if k != i && active[k] {
+        for &k in &alive {
+            if k != i {
                 let v = distance_sq(&clusters[i].centre, &clusters[k].centre);
                 d[i * n + k] = v;
                 d[k * n + i] = v;
             }
         }
-        nearest[i] = nearest_of(&d, &active, i);
-        for k in 0..n {
-            if !active[k] || k == i {
+        nearest[i] = nearest_of(&d, &alive, i);
+        for idx in 0..alive.len() {
+            let k = alive[idx];
+            if k == i {
                 continue;
             }
             if nearest[k].0 == i || nearest[k].0 == j {
-                nearest[k] = nearest_of(&d, &active, k);
+                nearest[k] = nearest_of(&d, &alive, k);
             } else if d[k * n + i] < nearest[k].1 {
                 nearest[k] = (i, d[k * n + i]);
             }
