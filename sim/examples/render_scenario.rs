@@ -11,6 +11,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let every: u64 = args.get(3).and_then(|s| s.parse().ok()).unwrap_or(30);
     std::fs::create_dir_all(&out)?;
     let sim = Simulator::new(Scenario::resolve(name)?)?;
+    let cpu0 = cpu_seconds();
     let start = Instant::now();
     let mut n = 0;
     for (img, truth) in sim {
@@ -33,8 +34,27 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         }
     }
     println!(
-        "{n} frames, {:.2} ms per frame (incl. truth)",
-        start.elapsed().as_secs_f64() * 1e3 / n as f64
+        "{n} frames, {:.2} ms wall, {:.2} ms CPU per frame (incl. truth)",
+        start.elapsed().as_secs_f64() * 1e3 / n as f64,
+        (cpu_seconds() - cpu0) * 1e3 / n as f64
     );
     Ok(())
+}
+
+/// CPU time of this process (user + system), seconds, from /proc (Linux).
+fn cpu_seconds() -> f64 {
+    let stat = std::fs::read_to_string("/proc/self/stat").unwrap_or_default();
+    let fields: Vec<&str> = stat
+        .rsplit(')')
+        .next()
+        .unwrap_or("")
+        .split_whitespace()
+        .collect();
+    let ticks = |i: usize| {
+        fields
+            .get(i)
+            .and_then(|v| v.parse::<f64>().ok())
+            .unwrap_or(0.0)
+    };
+    (ticks(11) + ticks(12)) / 100.0
 }

@@ -160,13 +160,13 @@ projection_matrix:\n  rows: 3\n  cols: 4\n  data: [{fx}, 0.0, {cx}, 0.0, 0.0, {f
         let width = uint("image_width")?;
         let height = uint("image_height")?;
         let k = data("camera_matrix", 9)?;
-        if let Some(model) = root.get("distortion_model").and_then(Value::as_str) {
-            if model != "plumb_bob" && model != "rational_polynomial" {
-                return Err(err(
-                    "distortion_model",
-                    format!("`{model}` is not supported (plumb_bob only)"),
-                ));
-            }
+        if let Some(model) = root.get("distortion_model").and_then(Value::as_str)
+            && model != "plumb_bob"
+        {
+            return Err(err(
+                "distortion_model",
+                format!("`{model}` is not supported (plumb_bob only)"),
+            ));
         }
         let d = match root.get("distortion_coefficients") {
             Some(_) => data("distortion_coefficients", 0)?,

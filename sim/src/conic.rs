@@ -106,7 +106,7 @@ pub fn circle_poses(cam: &SimCamera, c_img: &M3, radius: f64) -> Option<[(V3, V3
         let a2_inv = a2.try_inverse()?;
         let x0 = -a2_inv * bv;
         let rho2 = (bv.dot(&(a2_inv * bv)) - m[(2, 2)]) / (0.5 * a2.trace());
-        if !(rho2 > 0.0) {
+        if rho2.is_nan() || rho2 <= 0.0 {
             return None;
         }
         let centre_unit = b1 * x0[0] + b2 * x0[1] + n;

@@ -175,7 +175,9 @@ pub struct Renderer {
     h: usize,
     /// Undistorted normalised ray (x, y) of every pixel.
     rays: Vec<[f32; 2]>,
-    vignette: Vec<f32>,
+    /// (u - cx)^2 per column, and 1 / (corner radius)^2, for vignetting.
+    du2: Vec<f32>,
+    inv_corner2: f32,
     gw: usize,
     gh: usize,
     grid_rays: Vec<V3>,
@@ -183,6 +185,28 @@ pub struct Renderer {
     gauss: Vec<f32>,
     rad: Vec<f32>,
     scratch: Vec<f32>,
+}
+
+/// One image row of the sky, bilinear from the coarse grid.
+fn sky_row(
+    grid: &[f32],
+    gw: usize,
+    v: usize,
+    ix: &[(usize, f32)],
+    tmp: &mut [f32],
+    out: &mut [f32],
+) {
+    let (j, fy) = (v / GRID, (v % GRID) as f32 / GRID as f32);
+    let (g0, g1) = (
+        &grid[j * gw..(j + 1) * gw],
+        &grid[(j + 1) * gw..(j + 2) * gw],
+    );
+    for ((t, a), b) in tmp.iter_mut().zip(g0).zip(g1) {
+        *t = a + (b - a) * fy;
+    }
+    for (o, &(i, fx)) in out.iter_mut().zip(ix) {
+        *o = tmp[i] + (tmp[i + 1] - tmp[i]) * fx;
+    }
 }
 
 fn hash2(ix: i32, iy: i32, seed: u32) -> f32 {
@@ -279,15 +303,12 @@ impl Renderer {
             cam.undistort_normalized(xd, yd).unwrap_or((xd, yd))
         };
         let mut rays = Vec::with_capacity(w * h);
-        let mut vignette = Vec::with_capacity(w * h);
         let r_corner2 =
             (cam.cx.max(w as f64 - cam.cx)).powi(2) + (cam.cy.max(h as f64 - cam.cy)).powi(2);
         for v in 0..h {
             for u in 0..w {
                 let (x, y) = ray_of(u as f64, v as f64);
                 rays.push([x as f32, y as f32]);
-                let r2 = ((u as f64 - cam.cx).powi(2) + (v as f64 - cam.cy).powi(2)) / r_corner2;
-                vignette.push((1.0 - look.vignette * r2 * (0.6 + 0.4 * r2)) as f32);
             }
         }
         let gw = w.div_ceil(GRID) + 1;
@@ -316,7 +337,8 @@ impl Renderer {
             w,
             h,
             rays,
-            vignette,
+            du2: (0..w).map(|u| (u as f32 - cam.cx as f32).powi(2)).collect(),
+            inv_corner2: (1.0 / r_corner2) as f32,
             gw,
             gh,
             grid_rays,
@@ -386,7 +408,7 @@ impl Renderer {
     /// Renders one frame.
     pub fn render(&mut self, scene: &FrameScene) -> GrayImage {
         let (w, h) = (self.w, self.h);
-        // 1. Sky on the coarse grid, bilinear to every pixel.
+        // 1. Sky on the coarse grid (bilinear to the pixels, row by row).
         let mut sky_grid = vec![0f32; self.gw * self.gh];
         let mut veil_grid = vec![0f32; self.gw * self.gh];
         for (k, r) in self.grid_rays.iter().enumerate() {
@@ -394,42 +416,54 @@ impl Renderer {
             sky_grid[k] = s;
             veil_grid[k] = v;
         }
-        let mut rad = std::mem::take(&mut self.rad);
         let ix: Vec<(usize, f32)> = (0..w)
             .map(|u| (u / GRID, (u % GRID) as f32 / GRID as f32))
             .collect();
-        let mut row = vec![0f32; self.gw];
-        for v in 0..h {
-            let (j, fy) = (v / GRID, (v % GRID) as f32 / GRID as f32);
-            let (g0, g1) = (
-                &sky_grid[j * self.gw..(j + 1) * self.gw],
-                &sky_grid[(j + 1) * self.gw..(j + 2) * self.gw],
-            );
-            for i in 0..self.gw {
-                row[i] = g0[i] + (g1[i] - g0[i]) * fy;
-            }
-            let out = &mut rad[v * w..(v + 1) * w];
-            for (o, &(i, fx)) in out.iter_mut().zip(&ix) {
-                *o = row[i] + (row[i + 1] - row[i]) * fx;
-            }
-        }
-        // 2. Hose (behind the drogue), drogue, blur, probe.
-        if let Some(hose) = scene.hose.and_then(|t| t.clipped(0.05)) {
-            self.draw_tube(&mut rad, &hose, None);
-        }
+        // 2. Rows the objects touch get a full radiance row; the others go
+        // straight from the sky to the sensor.
+        let hose = scene.hose.and_then(|t| t.clipped(0.05));
+        let probe = scene.probe.and_then(|t| t.clipped(0.05));
+        let hose_spans = hose.map(|t| self.tube_spans(&t)).unwrap_or_default();
+        let probe_spans = probe.map(|t| self.tube_spans(&t)).unwrap_or_default();
         let bbox = self.drogue_bbox(&scene.drogue);
+        let m = scene.blur_px;
+        let blur_len = (m[0] * m[0] + m[1] * m[1]).sqrt();
+        let mut dirty = vec![false; h];
+        for &(v, _, _) in hose_spans.iter().chain(&probe_spans) {
+            dirty[v] = true;
+        }
+        if let Some(b) = bbox {
+            let pad = (blur_len / 2.0).ceil() as usize + 2;
+            for d in &mut dirty[b.1.saturating_sub(pad)..=(b.3 + pad).min(h - 1)] {
+                *d = true;
+            }
+        }
+        let mut rad = std::mem::take(&mut self.rad);
+        let mut grid_row = vec![0f32; self.gw];
+        for v in (0..h).filter(|v| dirty[*v]) {
+            sky_row(
+                &sky_grid,
+                self.gw,
+                v,
+                &ix,
+                &mut grid_row,
+                &mut rad[v * w..(v + 1) * w],
+            );
+        }
+        if let Some(hose) = hose {
+            self.draw_tube(&mut rad, &hose, &hose_spans, None);
+        }
         if let Some(b) = bbox {
             self.draw_drogue(&mut rad, &scene.drogue, b);
-            let m = scene.blur_px;
-            if (m[0] * m[0] + m[1] * m[1]).sqrt() >= 0.3 {
+            if blur_len >= 0.3 {
                 self.blur(&mut rad, b, m);
             }
         }
-        if let Some(probe) = scene.probe.and_then(|t| t.clipped(0.05)) {
-            self.draw_tube(&mut rad, &probe, Some(&scene.drogue));
+        if let Some(probe) = probe {
+            self.draw_tube(&mut rad, &probe, &probe_spans, Some(&scene.drogue));
         }
         // 3. Sensor: vignette, glare veil, gain, noise, 8 bits.
-        let img = self.sensor(&rad, &veil_grid, &ix, scene.noise_seed);
+        let img = self.sensor(&rad, &dirty, &sky_grid, &veil_grid, &ix, scene.noise_seed);
         self.rad = rad;
         img
     }
@@ -613,13 +647,19 @@ impl Renderer {
         spans
     }
 
-    fn draw_tube(&self, rad: &mut [f32], tube: &Tube, in_front_of: Option<&DrogueView>) {
+    fn draw_tube(
+        &self,
+        rad: &mut [f32],
+        tube: &Tube,
+        spans: &[(usize, usize, usize)],
+        in_front_of: Option<&DrogueView>,
+    ) {
         let Some(axis) = TubeAxis::new(tube) else {
             return;
         };
         let px = 1.0 / self.cam.fx;
         let base = tube.radiance;
-        for (v, u0, u1) in self.tube_spans(tube) {
+        for &(v, u0, u1) in spans {
             for u in u0..=u1 {
                 let ray = self.ray(u, v);
                 let Some((t, sd, k)) = axis.probe_ray(&ray) else {
@@ -693,7 +733,15 @@ impl Renderer {
         }
     }
 
-    fn sensor(&self, rad: &[f32], veil_grid: &[f32], ix: &[(usize, f32)], seed: u64) -> GrayImage {
+    fn sensor(
+        &self,
+        rad: &[f32],
+        dirty: &[bool],
+        sky_grid: &[f32],
+        veil_grid: &[f32],
+        ix: &[(usize, f32)],
+        seed: u64,
+    ) -> GrayImage {
         let (w, h) = (self.w, self.h);
         let l = &self.look;
         let gain = (255.0 * l.gain) as f32;
@@ -713,11 +761,19 @@ impl Renderer {
         let mask = self.gauss.len() - 1;
         let mut veil_row = vec![0f32; self.gw];
         let mut row = vec![0f32; w];
+        let mut grid_row = vec![0f32; self.gw];
         for v in 0..h {
-            let src = &rad[v * w..(v + 1) * w];
-            let vig = &self.vignette[v * w..(v + 1) * w];
-            for ((r, s), g) in row.iter_mut().zip(src).zip(vig) {
-                *r = s * g * gain;
+            if dirty[v] {
+                row.copy_from_slice(&rad[v * w..(v + 1) * w]);
+            } else {
+                sky_row(sky_grid, self.gw, v, ix, &mut grid_row, &mut row);
+            }
+            // Vignetting: 1 - k r^2 (0.6 + 0.4 r^2), r relative to the corner.
+            let dv2 = (v as f32 - self.cam.cy as f32).powi(2);
+            let k = l.vignette as f32;
+            for (r, du2) in row.iter_mut().zip(&self.du2) {
+                let r2 = (du2 + dv2) * self.inv_corner2;
+                *r *= (1.0 - k * r2 * (0.6 + 0.4 * r2)) * gain;
             }
             if glare {
                 let (j, fy) = (v / GRID, (v % GRID) as f32 / GRID as f32);

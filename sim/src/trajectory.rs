@@ -224,17 +224,17 @@ impl World {
 
         // Contact or miss when the tip crosses the drogue plane.
         let sep = drogue_t.x - tip_t.x;
-        if !self.coupled {
-            if let Some(prev) = self.prev_sep {
-                if prev > CONTACT_DEPTH_M && sep <= CONTACT_DEPTH_M {
-                    let l = [drogue_t.y - tip_t.y, drogue_t.z - tip_t.z];
-                    let dist = (l[0] * l[0] + l[1] * l[1]).sqrt();
-                    if dist <= sc.whip.capture_radius_m {
-                        self.coupled = true;
-                    } else if self.miss.is_none() {
-                        self.miss = Some((t, [l[0] / dist, l[1] / dist], tip_t.x - trail.x));
-                    }
-                }
+        if let Some(prev) = self.prev_sep
+            && !self.coupled
+            && prev > CONTACT_DEPTH_M
+            && sep <= CONTACT_DEPTH_M
+        {
+            let l = [drogue_t.y - tip_t.y, drogue_t.z - tip_t.z];
+            let dist = (l[0] * l[0] + l[1] * l[1]).sqrt();
+            if dist <= sc.whip.capture_radius_m {
+                self.coupled = true;
+            } else if self.miss.is_none() {
+                self.miss = Some((t, [l[0] / dist, l[1] / dist], tip_t.x - trail.x));
             }
         }
         self.prev_sep = Some(sep);

@@ -140,7 +140,7 @@ fn local_optimise(
 /// Points used to score class centres and to optimise candidates locally
 /// (every k-th point); the final refit uses all points.
 const MAX_SCORE_POINTS: usize = 150;
-const MAX_LO_POINTS: usize = 250;
+const MAX_LO_POINTS: usize = 200;
 
 /// Every k-th point, so that at most `max` remain.
 fn subsample(xy: &[[f64; 2]], max: usize) -> Vec<[f64; 2]> {
@@ -165,14 +165,9 @@ pub(crate) fn fit(
             .map(to_vector)
             .collect();
     let tolerance = cfg.adaptive_cluster_relative + cfg.adaptive_cluster_px / px;
-    let distance = |v: &[f64; 5], w: &[f64; 5]| {
-        v.iter()
-            .zip(w)
-            .map(|(x, y)| (x - y) * (x - y))
-            .sum::<f64>()
-            .sqrt()
-    };
-    let clusters = agglomerate(&set, distance, tolerance);
+    let distance_sq =
+        |v: &[f64; 5], w: &[f64; 5]| v.iter().zip(w).map(|(x, y)| (x - y) * (x - y)).sum::<f64>();
+    let clusters = agglomerate(&set, distance_sq, tolerance);
 
     // 3. Every class centre (an average of consistent subset fits, eq. 10)
     // is scored by its support within a wide band on a subsample; the best
@@ -223,26 +218,33 @@ pub(crate) fn fit(
     }
     let (_, winner) = best.ok_or(FitError::NoEllipse)?;
 
-    // 4. The winner on all points: finish the local optimisation, then
-    // select, refit geometrically, re-estimate the band; until stable.
-    let c = local_optimise(
-        xy,
-        &winner.model,
-        winner.band,
-        cfg,
-        min_band,
-        &mut keep,
-        &mut scratch,
-    )
-    .ok_or(FitError::NoEllipse)?;
-    let (mut model, mut band) = (c.model, c.band);
+    // 4. The winner on all points: Taubin rounds until the inlier set is
+    // stable (cheap), then the geometric refit of that set; if its band
+    // then selects other points, one more geometric refit.
+    let (mut model, mut band) = (winner.model, winner.band);
     let mut count = select(xy, &model, band, &mut keep);
-    // Until a geometric refit succeeds, the result is the Taubin model and
-    // the points it was fitted to.
-    let mut used = (count >= 5).then(|| keep.clone());
     let mut next = vec![false; xy.len()];
-    let mut selected: Vec<[f64; 2]> = Vec::with_capacity(xy.len());
     for _ in 0..3 {
+        if count < 5 {
+            break;
+        }
+        if let Some(e) = taubin::fit_ellipse(xy, Some(&keep)).filter(plausible) {
+            model = e;
+        }
+        band = (cfg.adaptive_inlier_sigmas * robust_sigma(xy, &model, &keep, &mut scratch))
+            .max(min_band);
+        count = select(xy, &model, band, &mut next);
+        let stable = next == keep;
+        std::mem::swap(&mut keep, &mut next);
+        if stable {
+            break;
+        }
+    }
+    // Until a geometric refit succeeds, the result is the Taubin model and
+    // the points within its band.
+    let mut used = (count >= 5).then(|| keep.clone());
+    let mut selected: Vec<[f64; 2]> = Vec::with_capacity(xy.len());
+    for _ in 0..2 {
         if count < 5 {
             break;
         }

@@ -17,13 +17,9 @@ use crate::measure::ellipse::Ellipse;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
-/// Eq. 8: Euclidean distance of (xc, yc, a, b, theta).
-fn eq8(v: &[f64; 5], w: &[f64; 5]) -> f64 {
-    v.iter()
-        .zip(w)
-        .map(|(x, y)| (x - y) * (x - y))
-        .sum::<f64>()
-        .sqrt()
+/// Eq. 8, squared: Euclidean distance of (xc, yc, a, b, theta).
+fn eq8_sq(v: &[f64; 5], w: &[f64; 5]) -> f64 {
+    v.iter().zip(w).map(|(x, y)| (x - y) * (x - y)).sum::<f64>()
 }
 
 /// The ellipses of `subsets` random subsets of `size` points (normalised
@@ -67,7 +63,7 @@ pub(crate) fn fit(
     })
     .collect();
     // Lines 6-17: cluster; M* is the centre of the biggest class.
-    let clusters = agglomerate(&set, eq8, cfg.algorithm1_cluster_threshold);
+    let clusters = agglomerate(&set, eq8_sq, cfg.algorithm1_cluster_threshold);
     let best = clusters.first().ok_or(FitError::NoEllipse)?;
     let [cx, cy, a, b, theta] = best.centre;
     let m_star = pts.px_to_normalised(&Ellipse::new(cx, cy, a, b, theta));

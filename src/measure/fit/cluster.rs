@@ -16,14 +16,19 @@ pub(crate) struct Cluster {
     pub count: usize,
 }
 
-/// Clusters `vectors` with `distance` until no two centres are closer than
-/// `threshold`. Returns the classes, biggest first (ties: lower index of
+/// Clusters `vectors` until no two centres are closer than `threshold`;
+/// `distance_sq` is the squared distance (NaN counts as infinitely far). Returns the classes, biggest first (ties: lower index of
 /// first member first, so the order is deterministic).
 pub(crate) fn agglomerate(
     vectors: &[[f64; 5]],
-    distance: impl Fn(&[f64; 5], &[f64; 5]) -> f64,
+    distance_sq: impl Fn(&[f64; 5], &[f64; 5]) -> f64,
     threshold: f64,
 ) -> Vec<Cluster> {
+    let distance_sq = |v: &[f64; 5], w: &[f64; 5]| {
+        let d = distance_sq(v, w);
+        if d.is_nan() { f64::INFINITY } else { d }
+    };
+    let threshold = threshold * threshold;
     let n = vectors.len();
     let mut clusters: Vec<Cluster> = vectors
         .iter()
@@ -33,30 +38,32 @@ pub(crate) fn agglomerate(
         })
         .collect();
     let mut active = vec![true; n];
+    // Indices of the active classes (compact, so scans skip merged ones).
+    let mut alive: Vec<usize> = (0..n).collect();
     // Full symmetric distance matrix, and each row's nearest active column.
     let mut d = vec![f64::INFINITY; n * n];
     for i in 0..n {
         for j in (i + 1)..n {
-            let v = distance(&vectors[i], &vectors[j]);
-            let v = if v.is_nan() { f64::INFINITY } else { v };
+            let v = distance_sq(&vectors[i], &vectors[j]);
             d[i * n + j] = v;
             d[j * n + i] = v;
         }
     }
-    let nearest_of = |d: &[f64], active: &[bool], i: usize| -> (usize, f64) {
+    let nearest_of = |d: &[f64], alive: &[usize], i: usize| -> (usize, f64) {
+        let row = &d[i * n..(i + 1) * n];
         let mut best = (usize::MAX, f64::INFINITY);
-        for j in 0..n {
-            if j != i && active[j] && d[i * n + j] < best.1 {
-                best = (j, d[i * n + j]);
+        for &j in alive {
+            if j != i && row[j] < best.1 {
+                best = (j, row[j]);
             }
         }
         best
     };
-    let mut nearest: Vec<(usize, f64)> = (0..n).map(|i| nearest_of(&d, &active, i)).collect();
+    let mut nearest: Vec<(usize, f64)> = (0..n).map(|i| nearest_of(&d, &alive, i)).collect();
     loop {
         let mut pick = (usize::MAX, f64::INFINITY);
-        for i in 0..n {
-            if active[i] && nearest[i].1 < pick.1 {
+        for &i in &alive {
+            if nearest[i].1 < pick.1 {
                 pick = (i, nearest[i].1);
             }
         }
@@ -74,22 +81,25 @@ pub(crate) fn agglomerate(
         clusters[i].centre = centre;
         clusters[i].count += clusters[j].count;
         active[j] = false;
+        if let Some(pos) = alive.iter().position(|&k| k == j) {
+            alive.remove(pos);
+        }
         // Row and column i from the new centre.
-        for k in 0..n {
-            if k != i && active[k] {
-                let v = distance(&clusters[i].centre, &clusters[k].centre);
-                let v = if v.is_nan() { f64::INFINITY } else { v };
+        for &k in &alive {
+            if k != i {
+                let v = distance_sq(&clusters[i].centre, &clusters[k].centre);
                 d[i * n + k] = v;
                 d[k * n + i] = v;
             }
         }
-        nearest[i] = nearest_of(&d, &active, i);
-        for k in 0..n {
-            if !active[k] || k == i {
+        nearest[i] = nearest_of(&d, &alive, i);
+        for idx in 0..alive.len() {
+            let k = alive[idx];
+            if k == i {
                 continue;
             }
             if nearest[k].0 == i || nearest[k].0 == j {
-                nearest[k] = nearest_of(&d, &active, k);
+                nearest[k] = nearest_of(&d, &alive, k);
             } else if d[k * n + i] < nearest[k].1 {
                 nearest[k] = (i, d[k * n + i]);
             }
@@ -109,11 +119,7 @@ mod tests {
     use super::*;
 
     fn euclid(a: &[f64; 5], b: &[f64; 5]) -> f64 {
-        a.iter()
-            .zip(b)
-            .map(|(x, y)| (x - y) * (x - y))
-            .sum::<f64>()
-            .sqrt()
+        a.iter().zip(b).map(|(x, y)| (x - y) * (x - y)).sum::<f64>()
     }
 
     #[test]

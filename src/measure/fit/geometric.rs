@@ -81,7 +81,8 @@ impl Geometry {
             let n = (nc * nc + ns * ns).sqrt();
             ct = nc / n;
             st = ns / n;
-            if step.abs() < 1.0e-12 {
+            // 1e-9 rad moves the foot by 1e-9 of the ellipse's size.
+            if step.abs() < 1.0e-9 {
                 break;
             }
         }
@@ -101,6 +102,7 @@ impl Geometry {
     }
 
     /// Signed orthogonal distance of `p` (positive outside).
+    #[cfg(test)]
     pub fn distance(&self, p: [f64; 2]) -> f64 {
         self.foot(p, None).dist
     }
@@ -185,7 +187,9 @@ pub(crate) fn refine(points: &[[f64; 2]], init: &Ellipse, iterations: usize) -> 
             std::mem::swap(&mut params, &mut trial_params);
             (cost, h, grad) = (c2, h2, g2);
             lambda = (lambda * 0.1).max(1.0e-12);
-            if gain <= 1.0e-14 * cost.max(f64::MIN_POSITIVE) || delta.norm() < 1.0e-12 {
+            // Converged: the step moves the outline by < 1e-7 of the data's
+            // size (normalised coordinates), or the cost stopped falling.
+            if delta.norm() < 1.0e-7 || gain <= 1.0e-10 * cost {
                 break;
             }
         } else {

@@ -186,7 +186,8 @@ pub struct FitResult {
     pub ellipse: Ellipse,
     /// One flag per input point: kept by the robust fit.
     pub inliers: Vec<bool>,
-    /// RMS geometric residual of the inliers, pixels.
+    /// RMS geometric residual of the inliers, pixels (first-order
+    /// orthogonal distance).
     pub rms_residual_px: f64,
 }
 
@@ -340,11 +341,14 @@ impl Points {
         let mut inliers = vec![false; self.total];
         let mut sum_sq = 0.0;
         let mut count = 0usize;
-        let geo = geometric::Geometry::new(e);
+        // First-order (Sampson) distance: exact to first order for points
+        // near the curve, which inliers are, and much cheaper than the foot
+        // point.
+        let conic = e.to_conic();
         for (k, &keep) in inliers_n.iter().enumerate() {
             if keep {
                 inliers[self.index[k]] = true;
-                let d = geo.distance(self.xy[k]);
+                let d = conic.sampson_distance(self.xy[k][0], self.xy[k][1]);
                 sum_sq += d * d;
                 count += 1;
             }
