@@ -560,3 +560,69 @@ fn tcp_poses_flow_and_survive_a_peer_restart() {
     assert!(s.reconnects >= 1 && s.io_errors >= 1, "{s:?}");
     link.shutdown();
 }
+
+#[test]
+fn udp_telemetry_is_placed_on_our_clock_by_timesync() {
+    let rt = runtime();
+    let mut peer = UdpPeer::bind();
+    let cfg = link_config();
+    let link = Link::start(&cfg, Some(&peer.address()), rt.handle()).unwrap();
+    // The autopilot booted an hour ago: its clock = Unix - boot.
+    let boot_unix_ns = unix_now_ns() - 3_600_000_000_000;
+    let got = peer.collect_until(Duration::from_secs(3), |g| {
+        g.iter()
+            .any(|x| matches!(&x.message, MavMessage::TIMESYNC(t) if t.tc1 == 0))
+    });
+    let ts1 = got
+        .iter()
+        .find_map(|g| match &g.message {
+            MavMessage::TIMESYNC(t) if t.tc1 == 0 => Some(t.ts1),
+            _ => None,
+        })
+        .expect("the link asks for TIMESYNC");
+    let autopilot_ns = (unix_now_ns() - boot_unix_ns) as i64;
+    peer.send(&MavMessage::TIMESYNC(TIMESYNC_DATA {
+        tc1: autopilot_ns,
+        ts1,
+        target_system: 1,
+        target_component: 197,
+    }));
+    sleep(Duration::from_millis(100));
+    let offset = link.stats().timesync_offset_ns;
+    let expect = -(boot_unix_ns as i64);
+    assert!(
+        (offset - expect).abs() < 50_000_000,
+        "offset {offset} vs {expect}"
+    );
+
+    // Telemetry from 5 s ago (by the autopilot's clock), arriving now.
+    let t1_ms = ((unix_now_ns() - boot_unix_ns) / 1_000_000 - 5000) as u32;
+    for (dt, north) in [(0u32, 10.0f32), (100, 12.0)] {
+        let mut att = attitude(0.0, 0.0, 0.0);
+        let mut pos = local_position(north, 0.0, -5.0);
+        if let MavMessage::ATTITUDE(a) = &mut att {
+            a.time_boot_ms = t1_ms + dt;
+        }
+        if let MavMessage::LOCAL_POSITION_NED(p) = &mut pos {
+            p.time_boot_ms = t1_ms + dt;
+        }
+        peer.send(&att);
+        peer.send(&pos);
+    }
+    sleep(Duration::from_millis(100));
+    let mid = boot_unix_ns + (u64::from(t1_ms) + 50) * 1_000_000;
+    let v = link
+        .vehicle_pose_at(mid)
+        .expect("pose at the autopilot's time");
+    // Halfway between the two samples, to within the sync error (< 50 ms of
+    // a 20 m/s motion).
+    assert!(
+        close(v.position_ned_m[0], 11.0, 0.3),
+        "{:?}",
+        v.position_ned_m
+    );
+    assert_eq!(v.position_ned_m[2], -5.0);
+    // Arrival time means nothing here: there is no pose at "now".
+    assert!(link.vehicle_pose_at(unix_now_ns()).is_none());
+    link.shutdown();
+}
