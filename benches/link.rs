@@ -150,10 +150,7 @@ fn bench_submit_to_wire(c: &mut Criterion) {
                 let t0 = Instant::now();
                 link.submit(Arc::new(m));
                 // Skip heartbeats: wait for the LANDING_TARGET (id 149).
-                loop {
-                    let Ok((n, _)) = peer.recv_from(&mut buf) else {
-                        break;
-                    };
+                while let Ok((n, _)) = peer.recv_from(&mut buf) {
                     if n > 10 && buf[7] == 149 && buf[8] == 0 {
                         break;
                     }
