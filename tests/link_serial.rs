@@ -84,11 +84,14 @@ fn serial_sends_poses_and_resumes_after_the_device_comes_back() {
         })
     };
 
-    // Autopilot heartbeats in, poses out.
+    // Autopilot heartbeats in (once the link has the port open), poses out.
+    let mut bytes = Vec::new();
+    collect(&mut master, &mut bytes, Duration::from_secs(3), |m| {
+        !m.is_empty()
+    });
     master
         .write_all(&encode(&autopilot_heartbeat(), 0, None))
         .unwrap();
-    let mut bytes = Vec::new();
     let msgs = collect(&mut master, &mut bytes, Duration::from_secs(3), |m| {
         pose_times(m).len() >= 5
     });
@@ -112,7 +115,11 @@ fn serial_sends_poses_and_resumes_after_the_device_comes_back() {
     drop(master);
     std::fs::remove_file(&dev).unwrap();
     sleep(Duration::from_millis(1500));
-    assert!(link.stats().io_errors >= 1, "{:?}", link.stats());
+    assert!(
+        wait_for(Duration::from_secs(2), || link.stats().io_errors >= 1),
+        "{:?}",
+        link.stats()
+    );
 
     // Plugged back in: poses flow again within 2 s, and only fresh ones.
     let mut master = plug(&dev);
@@ -165,7 +172,9 @@ fn serial_garbage_does_not_stop_the_stream() {
     master.write_all(&noise).unwrap();
     master.write_all(&vec![0u8; 300]).unwrap();
     master.write_all(&good).unwrap();
-    sleep(Duration::from_millis(300));
+    wait_for(Duration::from_secs(2), || {
+        link.stats().last_heartbeat_age_s >= 0.0
+    });
     let s = link.stats();
     assert!(s.bad_bytes >= 5000, "{s:?}");
     assert!(s.last_heartbeat_age_s >= 0.0, "{s:?}");

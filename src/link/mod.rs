@@ -282,3 +282,58 @@ impl LinkHandle {
         self.shared.shutdown_tx.send_replace(true);
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::config::Config;
+
+    fn start(cfg: &LinkConfig, conn: Option<&str>) -> Result<LinkHandle, LinkError> {
+        let rt = tokio::runtime::Builder::new_current_thread()
+            .enable_all()
+            .build()
+            .unwrap();
+        let r = Link::start(cfg, conn, rt.handle());
+        if let Ok(h) = &r {
+            h.shutdown();
+        }
+        r
+    }
+
+    #[test]
+    fn bad_addresses_and_configs_fail_at_start() {
+        let cfg = Config::embedded().link;
+        assert!(matches!(
+            start(&cfg, Some("udpout:nowhere")),
+            Err(LinkError::Address(_))
+        ));
+        let mut c = cfg.clone();
+        c.signing_require = true;
+        assert!(matches!(start(&c, None), Err(LinkError::Signing(_))));
+        c.signing_passphrase = "x".into();
+        c.signing_key_file = "/nonexistent/key".into();
+        assert!(matches!(start(&c, None), Err(LinkError::Signing(_))));
+        c.signing_key_file = "".into();
+        assert!(start(&c, None).is_ok());
+        let mut c = cfg.clone();
+        c.reconnect_max_ms = c.reconnect_min_ms - 1;
+        assert!(matches!(start(&c, None), Err(LinkError::Config(_))));
+        let mut c = cfg.clone();
+        c.max_rate_hz = f64::NAN;
+        assert!(matches!(start(&c, None), Err(LinkError::Config(_))));
+        let mut c = cfg;
+        c.system_id = 0;
+        assert!(matches!(start(&c, None), Err(LinkError::Config(_))));
+    }
+
+    #[test]
+    fn every_pose_message_name_parses_from_config() {
+        let c = Config::from_toml_str(
+            "[link]\nmessages = [\"landing_target\", \"landing_target_ned\", \"vision_position_estimate\", \"odometry\"]\n",
+            "u.toml",
+        )
+        .unwrap();
+        assert_eq!(c.link.messages.len(), 4);
+        assert!(Config::from_toml_str("[link]\nmessages = [\"pose\"]\n", "u.toml").is_err());
+    }
+}

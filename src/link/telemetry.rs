@@ -251,8 +251,8 @@ mod tests {
         let p = tm.pose_at(t0 + 25 * MS).unwrap();
         // Linear interpolation a quarter of the way.
         let expect = [0.5, -1.0, -10.5];
-        for k in 0..3 {
-            assert!((p.position_ned_m[k] - expect[k]).abs() < 1e-9);
+        for (got, want) in p.position_ned_m.iter().zip(expect) {
+            assert!((got - want).abs() < 1e-9);
         }
         // Slerp of a pure yaw: a quarter of 0.2 rad about down.
         let yaw = 2.0 * p.q_ned_body[3].atan2(p.q_ned_body[0]);

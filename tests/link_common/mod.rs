@@ -247,3 +247,18 @@ pub fn count(got: &[Got], name: &str) -> usize {
         .filter(|g| g.message.message_name() == name)
         .count()
 }
+
+/// Polls `cond` until it holds or `limit` passes; returns whether it held.
+/// (Loaded CI machines: never assume a fixed sleep was long enough.)
+pub fn wait_for(limit: Duration, mut cond: impl FnMut() -> bool) -> bool {
+    let end = Instant::now() + limit;
+    loop {
+        if cond() {
+            return true;
+        }
+        if Instant::now() > end {
+            return false;
+        }
+        std::thread::sleep(Duration::from_millis(10));
+    }
+}
