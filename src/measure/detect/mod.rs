@@ -156,7 +156,7 @@ impl Detector {
             return None;
         }
         if let Some(h) = hint.filter(|h| h.a.is_finite() && h.b > 0.5 && h.a < 1e5) {
-            if let Some(v) = self.verify_near(image, h, true) {
+            if let Some(v) = self.verify_settled(image, h) {
                 return Some(v.into_candidate());
             }
         }
@@ -241,15 +241,6 @@ impl Detector {
             }
             for (j, seed) in seeds.iter().enumerate() {
                 let r = self.verify_seed(image, seed, 3 * i as u64 + j as u64);
-                if std::env::var_os("DETECT_DEBUG").is_some() {
-                    eprintln!(
-                        "seed {seed:?} ring {:.2} {:?} {:.1} -> {:?}",
-                        b.ringed_light,
-                        b.ringed_px,
-                        b.ringed_radius_px,
-                        r.as_ref().map(|v| (v.ellipse, v.score))
-                    );
-                }
                 if let Some(v) = r {
                     if best.as_ref().is_none_or(|bv| v.score > bv.score) {
                         best = Some(v);
@@ -293,12 +284,7 @@ impl Detector {
             }
         }
         if points.len() < 8 {
-            {
-                if std::env::var_os("DETECT_DEBUG").is_some() {
-                    eprintln!("reject at line 275");
-                }
-                return None;
-            }
+            return None;
         }
         let scale = seed.b_px.max(1.0);
         let tolerance = (0.03 * scale).max(1.0);
@@ -316,25 +302,12 @@ impl Detector {
                 n as f64 >= 0.8 * points.len() as f64
             })
             .or_else(|| {
-                conic_fit::ransac_ellipse(&points, tolerance, 150, self.cfg.seed ^ index)
+                conic_fit::ransac_ellipse(&points, tolerance, 300, self.cfg.seed ^ index)
             })?;
         if !self.plausible(&first, 0.5) {
-            {
-                if std::env::var_os("DETECT_DEBUG").is_some() {
-                    eprintln!("reject at line 296");
-                }
-                return None;
-            }
+            return None;
         }
-        let mut v = self.verify_near(image, &first, false)?;
-        // A centre that moved a lot (the first pass started off the disc):
-        // one more narrow pass from the new centre.
-        let moved = (v.ellipse.cx - first.cx).hypot(v.ellipse.cy - first.cy);
-        if moved > 0.1 * v.ellipse.b {
-            let again = v.ellipse;
-            v = self.verify_near(image, &again, false)?;
-        }
-        Some(v)
+        self.verify_settled(image, &first)
     }
 
     /// Size and shape plausible for the disc (`slack` widens the limits).
@@ -348,6 +321,22 @@ impl Detector {
 
     /// Narrow ray pass around an ellipse (undistorted pixels), robust refit,
     /// and the evidence score.
+    /// [`Self::verify_near`], repeated from its own result while that moves
+    /// by more than half a pixel (the narrow search is centred on the start
+    /// ellipse: a start a few pixels off gives edges near the window's ends).
+    fn verify_settled(&mut self, image: &GrayImage, start: &Ellipse) -> Option<Verified> {
+        let mut v = self.verify_near(image, start, false)?;
+        let mut previous = *start;
+        for _ in 0..2 {
+            if v.ellipse.max_param_error_px(&previous) <= 0.5 {
+                break;
+            }
+            previous = v.ellipse;
+            v = self.verify_near(image, &previous, false)?;
+        }
+        Some(v)
+    }
+
     fn verify_near(
         &mut self,
         image: &GrayImage,
@@ -392,24 +381,14 @@ impl Detector {
             }
         }
         if rays_in_image < rays / 4 || undistorted.len() < self.cfg.min_rim_points as usize {
-            {
-                if std::env::var_os("DETECT_DEBUG").is_some() {
-                    eprintln!("reject at line 364");
-                }
-                return None;
-            }
+            return None;
         }
         let tol = self.cfg.inlier_tolerance_px.max(0.1);
         let coarse_tol = (0.05 * start.b).max(3.0 * tol);
         let ellipse = conic_fit::refine(start, &undistorted, coarse_tol, 2)
             .and_then(|e| conic_fit::refine(&e, &undistorted, tol, 2))?;
         if !self.plausible(&ellipse, 1.0) {
-            {
-                if std::env::var_os("DETECT_DEBUG").is_some() {
-                    eprintln!("reject at line 371");
-                }
-                return None;
-            }
+            return None;
         }
         let mut residuals = Vec::new();
         conic_fit::residuals(&ellipse, &undistorted, &mut residuals);
@@ -417,22 +396,12 @@ impl Detector {
             .filter(|&i| residuals[i] <= tol)
             .collect();
         if inliers.len() < self.cfg.min_rim_points as usize {
-            {
-                if std::env::var_os("DETECT_DEBUG").is_some() {
-                    eprintln!("reject at line 379");
-                }
-                return None;
-            }
+            return None;
         }
         let mut inlier_contrast: Vec<f64> = inliers.iter().map(|&i| contrasts[i]).collect();
         let rim_contrast = median(&mut inlier_contrast);
         if rim_contrast < self.cfg.min_contrast_gray {
-            {
-                if std::env::var_os("DETECT_DEBUG").is_some() {
-                    eprintln!("reject at line 384");
-                }
-                return None;
-            }
+            return None;
         }
         // Dark inside: one dark surface (shaded, but far less than the
         // rim's step), not a patchwork that happens to have edges on an ellipse.
@@ -440,12 +409,7 @@ impl Detector {
         darks.sort_by(f64::total_cmp);
         let (q1, q3) = (darks[darks.len() / 4], darks[3 * darks.len() / 4]);
         if q3 - q1 > 0.25 * rim_contrast {
-            {
-                if std::env::var_os("DETECT_DEBUG").is_some() {
-                    eprintln!("reject at line 392");
-                }
-                return None;
-            }
+            return None;
         }
         let shape = inliers.len() as f64 / rays_in_image as f64;
 
@@ -478,23 +442,13 @@ impl Detector {
             && ellipse.a >= self.cfg.canopy_required_from_px
             && canopy < self.cfg.min_canopy_fraction
         {
-            {
-                if std::env::var_os("DETECT_DEBUG").is_some() {
-                    eprintln!("reject at line 425");
-                }
-                return None;
-            }
+            return None;
         }
         let w = self.cfg.canopy_weight.clamp(0.0, 1.0);
         let score = (shape * ((1.0 - w) + w * canopy)).clamp(0.0, 1.0);
         let _ = tracked;
         if score < self.cfg.min_score {
-            {
-                if std::env::var_os("DETECT_DEBUG").is_some() {
-                    eprintln!("reject at line 431");
-                }
-                return None;
-            }
+            return None;
         }
         // Keep the points near the ellipse: the probe and hose outlines are
         // the fit's outliers, and fewer of them is better.
