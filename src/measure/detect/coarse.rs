@@ -74,10 +74,6 @@ pub struct Blob {
     pub theta: f64,
     /// Number of decimated pixels.
     pub area: usize,
-    /// Mean level inside, gray levels.
-    pub mean_level: f64,
-    /// Area over the moment ellipse's area: about 1 for a filled ellipse.
-    pub fill: f64,
     /// The region's deepest point (farthest from its border), full-res
     /// pixels, and that distance (the inscribed radius), full-res pixels.
     /// Unlike the centroid, it stays on the disc when a long hose or probe
@@ -172,8 +168,8 @@ impl BlobFinder {
             self.labels[start] = next;
             self.stack.clear();
             self.stack.push(start as u32);
-            let (mut n, mut sx, mut sy, mut sxx, mut sxy, mut syy, mut sl) =
-                (0usize, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
+            let (mut n, mut sx, mut sy, mut sxx, mut sxy, mut syy) =
+                (0usize, 0.0, 0.0, 0.0, 0.0, 0.0);
             let mut bbox = [usize::MAX, usize::MAX, 0usize, 0usize];
             while let Some(i) = self.stack.pop() {
                 let i = i as usize;
@@ -184,7 +180,6 @@ impl BlobFinder {
                 sxx += x * x;
                 sxy += x * y;
                 syy += y * y;
-                sl += f64::from(img.pixels[i]);
                 let (xi, yi) = (i % w, i / w);
                 bbox = [
                     bbox[0].min(xi),
@@ -238,8 +233,6 @@ impl BlobFinder {
                 b_px: b * f,
                 theta,
                 area: n,
-                mean_level: sl / nf,
-                fill: nf / (std::f64::consts::PI * a * b),
                 core_px: [0.0; 2],
                 core_radius_px: 0.0,
                 ringed_px: [0.0; 2],

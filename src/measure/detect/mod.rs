@@ -261,12 +261,12 @@ impl Detector {
     /// Verifies a coarse seed: a wide ray pass from its centre, a robust
     /// fit, then the narrow pass around that fit.
     fn verify_seed(&mut self, image: &GrayImage, seed: &Seed, index: u64) -> Option<Verified> {
-        let rays = 64;
+        let rays = 48;
         let mut points = Vec::with_capacity(rays);
         let c = seed.centre_px;
-        // The disc's axis ratio is at least min_axis_ratio: an elongated
-        // region (disc plus hose or probe) is not searched along its length.
-        let longest = seed.b_px / self.cfg.min_axis_ratio.clamp(0.05, 1.0);
+        // An elongated region (disc plus hose or probe) is not searched
+        // along its length: the disc is across it.
+        let longest = 2.0 * seed.b_px;
         for k in 0..rays {
             let phi = TAU * k as f64 / rays as f64;
             let r = polar_radius(seed.a_px, seed.b_px, seed.theta, phi).min(longest);
@@ -274,7 +274,7 @@ impl Detector {
             let s_max = seed.reach * r + 4.0;
             // About a pixel of accuracy is enough here: coarser steps on
             // large seeds.
-            let step = (r / 60.0).clamp(0.5, 1.0);
+            let step = (r / 40.0).clamp(0.5, 2.0);
             rim::profile(image, c, dir, 1.0, s_max, step, &mut self.profile);
             if let Some(e) =
                 rim::strongest_rise(&self.profile, 1.0, step, self.cfg.min_contrast_gray as f32)
