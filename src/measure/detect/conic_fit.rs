@@ -128,15 +128,15 @@ pub fn ransac_ellipse(
             .iter()
             .filter(|p| conic.sampson_distance(p[0], p[1]) <= tolerance_px)
             .count();
-        if best.as_ref().is_none_or(|(c, _)| count > *c) {
-            if let Some(e) = conic.to_ellipse() {
-                best = Some((count, e));
-                // Enough draws for a 99 % chance of one all-inlier sample
-                // at the best inlier share seen so far.
-                let w = count as f64 / points.len() as f64;
-                let p_good = w.powi(5).clamp(1e-9, 1.0 - 1e-12);
-                needed = ((0.01f64).ln() / (1.0 - p_good).ln()).ceil().max(1.0) as usize;
-            }
+        if best.as_ref().is_none_or(|(c, _)| count > *c)
+            && let Some(e) = conic.to_ellipse()
+        {
+            best = Some((count, e));
+            // Enough draws for a 99 % chance of one all-inlier sample at the
+            // best inlier share seen so far.
+            let w = count as f64 / points.len() as f64;
+            let p_good = w.powi(5).clamp(1e-9, 1.0 - 1e-12);
+            needed = ((0.01f64).ln() / (1.0 - p_good).ln()).ceil().max(1.0) as usize;
         }
     }
     let (_, model) = best?;

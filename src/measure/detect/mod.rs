@@ -155,10 +155,10 @@ impl Detector {
         if image.width() < 8 || image.height() < 8 {
             return None;
         }
-        if let Some(h) = hint.filter(|h| h.a.is_finite() && h.b > 0.5 && h.a < 1e5) {
-            if let Some(v) = self.verify_settled(image, h) {
-                return Some(v.into_candidate());
-            }
+        if let Some(h) = hint.filter(|h| h.a.is_finite() && h.b > 0.5 && h.a < 1e5)
+            && let Some(v) = self.verify_settled(image, h)
+        {
+            return Some(v.into_candidate());
         }
         self.search_full(image).map(Verified::into_candidate)
     }
@@ -184,7 +184,7 @@ impl Detector {
         blobs.retain(|b| b.a_px >= 0.5 * self.min_radius_px && b.b_px >= 0.5);
         // Larger dark regions first: small ones are mostly noise and thin
         // shapes, and the budget of candidates is limited.
-        blobs.sort_by(|x, y| y.area.cmp(&x.area));
+        blobs.sort_by_key(|b| std::cmp::Reverse(b.area));
         // Drop near-duplicates (the same region at several thresholds).
         let mut kept: Vec<Blob> = Vec::new();
         for b in blobs.drain(..) {
@@ -241,10 +241,10 @@ impl Detector {
             }
             for (j, seed) in seeds.iter().enumerate() {
                 let r = self.verify_seed(image, seed, 3 * i as u64 + j as u64);
-                if let Some(v) = r {
-                    if best.as_ref().is_none_or(|bv| v.score > bv.score) {
-                        best = Some(v);
-                    }
+                if let Some(v) = r
+                    && best.as_ref().is_none_or(|bv| v.score > bv.score)
+                {
+                    best = Some(v);
                 }
             }
             if best
