@@ -85,6 +85,10 @@ pub struct RimCandidate {
     pub ellipse_px: Ellipse,
 }
 
+/// Rim ray spacing while candidates are compared, in multiples of the
+/// configured spacing.
+const SCOUT_SPACING_FACTOR: f64 = 3.0;
+
 /// Where and how large a coarse candidate is, full-res distorted pixels.
 #[derive(Clone, Debug)]
 struct Seed {
@@ -156,7 +160,7 @@ impl Detector {
             return None;
         }
         if let Some(h) = hint.filter(|h| h.a.is_finite() && h.b > 0.5 && h.a < 1e5)
-            && let Some(v) = self.verify_settled(image, h)
+            && let Some(v) = self.verify_settled(image, h, self.cfg.rim_point_spacing_px)
         {
             return Some(v.into_candidate());
         }
@@ -255,7 +259,12 @@ impl Detector {
             }
         }
         self.blobs = kept;
-        best
+        let scouted = best?;
+        let spacing = self.cfg.rim_point_spacing_px;
+        Some(
+            self.verify_settled(image, &scouted.ellipse, spacing)
+                .unwrap_or(scouted),
+        )
     }
 
     /// Verifies a coarse seed: a wide ray pass from its centre, a robust
@@ -307,7 +316,13 @@ impl Detector {
         if !self.plausible(&first, 0.5) {
             return None;
         }
-        self.verify_settled(image, &first)
+        // Candidates are compared on a sparser rim (cheaper); the winner
+        // gets the full density.
+        self.verify_settled(
+            image,
+            &first,
+            SCOUT_SPACING_FACTOR * self.cfg.rim_point_spacing_px,
+        )
     }
 
     /// Size and shape plausible for the disc (`slack` widens the limits).
@@ -324,15 +339,20 @@ impl Detector {
     /// [`Self::verify_near`], repeated from its own result while that moves
     /// by more than half a pixel (the narrow search is centred on the start
     /// ellipse: a start a few pixels off gives edges near the window's ends).
-    fn verify_settled(&mut self, image: &GrayImage, start: &Ellipse) -> Option<Verified> {
-        let mut v = self.verify_near(image, start, false)?;
+    fn verify_settled(
+        &mut self,
+        image: &GrayImage,
+        start: &Ellipse,
+        spacing_px: f64,
+    ) -> Option<Verified> {
+        let mut v = self.verify_near(image, start, spacing_px)?;
         let mut previous = *start;
         for _ in 0..2 {
             if v.ellipse.max_param_error_px(&previous) <= 0.5 {
                 break;
             }
             previous = v.ellipse;
-            v = self.verify_near(image, &previous, false)?;
+            v = self.verify_near(image, &previous, spacing_px)?;
         }
         Some(v)
     }
@@ -341,11 +361,11 @@ impl Detector {
         &mut self,
         image: &GrayImage,
         start: &Ellipse,
-        tracked: bool,
+        spacing_px: f64,
     ) -> Option<Verified> {
         let centre = self.camera.distort_px([start.cx, start.cy]);
         let perimeter = TAU * ((start.a * start.a + start.b * start.b) / 2.0).sqrt();
-        let rays = ((perimeter / self.cfg.rim_point_spacing_px.max(0.1)) as usize)
+        let rays = ((perimeter / spacing_px.max(0.1)) as usize)
             .clamp(24, self.cfg.max_rim_points.max(24) as usize);
         let min_contrast = self.cfg.min_contrast_gray as f32;
         let (w, h) = (f64::from(image.width()), f64::from(image.height()));
@@ -446,7 +466,6 @@ impl Detector {
         }
         let w = self.cfg.canopy_weight.clamp(0.0, 1.0);
         let score = (shape * ((1.0 - w) + w * canopy)).clamp(0.0, 1.0);
-        let _ = tracked;
         if score < self.cfg.min_score {
             return None;
         }
