@@ -36,8 +36,17 @@ impl Decimated {
             sums.iter_mut().for_each(|s| *s = 0);
             for y in by * factor..(by + 1) * factor {
                 let row = &raw[y * w..y * w + self.width * factor];
-                for (s, block) in sums.iter_mut().zip(row.chunks_exact(factor)) {
-                    *s += block.iter().map(|&p| u32::from(p)).sum::<u32>();
+                if factor == 4 {
+                    for (s, block) in sums.iter_mut().zip(row.chunks_exact(4)) {
+                        *s += u32::from(block[0])
+                            + u32::from(block[1])
+                            + u32::from(block[2])
+                            + u32::from(block[3]);
+                    }
+                } else {
+                    for (s, block) in sums.iter_mut().zip(row.chunks_exact(factor)) {
+                        *s += block.iter().map(|&p| u32::from(p)).sum::<u32>();
+                    }
                 }
             }
             let out = &mut self.pixels[by * self.width..(by + 1) * self.width];
@@ -65,10 +74,6 @@ pub struct Blob {
     pub theta: f64,
     /// Number of decimated pixels.
     pub area: usize,
-    /// Mean level inside, gray levels.
-    pub mean_level: f64,
-    /// Area over the moment ellipse's area: about 1 for a filled ellipse.
-    pub fill: f64,
     /// The region's deepest point (farthest from its border), full-res
     /// pixels, and that distance (the inscribed radius), full-res pixels.
     /// Unlike the centroid, it stays on the disc when a long hose or probe
@@ -151,6 +156,8 @@ impl BlobFinder {
         self.labels.resize(w * h, 0);
         let dark = |i: usize| f64::from(img.pixels[i]) <= threshold;
         let first_out = out.len();
+        // Union of the kept regions' boxes: the distance transform runs there only.
+        let mut region = [usize::MAX, usize::MAX, 0usize, 0usize];
         self.label_out.clear();
         self.label_out.push(None);
         let mut next = 1u32;
@@ -161,8 +168,9 @@ impl BlobFinder {
             self.labels[start] = next;
             self.stack.clear();
             self.stack.push(start as u32);
-            let (mut n, mut sx, mut sy, mut sxx, mut sxy, mut syy, mut sl) =
-                (0usize, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
+            let (mut n, mut sx, mut sy, mut sxx, mut sxy, mut syy) =
+                (0usize, 0.0, 0.0, 0.0, 0.0, 0.0);
+            let mut bbox = [usize::MAX, usize::MAX, 0usize, 0usize];
             while let Some(i) = self.stack.pop() {
                 let i = i as usize;
                 let (x, y) = ((i % w) as f64, (i / w) as f64);
@@ -172,8 +180,13 @@ impl BlobFinder {
                 sxx += x * x;
                 sxy += x * y;
                 syy += y * y;
-                sl += f64::from(img.pixels[i]);
                 let (xi, yi) = (i % w, i / w);
+                bbox = [
+                    bbox[0].min(xi),
+                    bbox[1].min(yi),
+                    bbox[2].max(xi),
+                    bbox[3].max(yi),
+                ];
                 for dy in -1i64..=1 {
                     for dx in -1i64..=1 {
                         let (nx, ny) = (xi as i64 + dx, yi as i64 + dy);
@@ -194,6 +207,12 @@ impl BlobFinder {
                 continue;
             }
             self.label_out.push(Some(out.len()));
+            region = [
+                region[0].min(bbox[0].saturating_sub(1)),
+                region[1].min(bbox[1].saturating_sub(1)),
+                region[2].max((bbox[2] + 1).min(w - 1)),
+                region[3].max((bbox[3] + 1).min(h - 1)),
+            ];
             let nf = n as f64;
             let (mx, my) = (sx / nf, sy / nf);
             // Second central moments; a filled ellipse has variance a^2/4
@@ -214,8 +233,6 @@ impl BlobFinder {
                 b_px: b * f,
                 theta,
                 area: n,
-                mean_level: sl / nf,
-                fill: nf / (std::f64::consts::PI * a * b),
                 core_px: [0.0; 2],
                 core_radius_px: 0.0,
                 ringed_px: [0.0; 2],
@@ -224,33 +241,44 @@ impl BlobFinder {
             });
         }
         if out.len() > first_out {
-            self.deepest_points(img, first_out, out);
+            self.deepest_points(img, region, first_out, out);
         }
     }
 
     /// Chamfer (3-4) distance of every dark pixel to the nearest non-dark
     /// pixel or the image border, and each region's deepest pixel.
-    fn deepest_points(&mut self, img: &Decimated, first_out: usize, out: &mut [Blob]) {
+    /// `region`: [x0, y0, x1, y1] (inclusive) holding the regions and a
+    /// pixel around them.
+    fn deepest_points(
+        &mut self,
+        img: &Decimated,
+        region: [usize; 4],
+        first_out: usize,
+        out: &mut [Blob],
+    ) {
         let (w, h) = (img.width, img.height);
+        let [rx0, ry0, rx1, ry1] = region;
         let d = &mut self.distance;
         d.clear();
         d.resize(w * h, 0);
         let labels = &self.labels;
         let inf = u32::MAX / 2;
-        for i in 0..w * h {
-            if labels[i] != 0 {
-                d[i] = inf;
+        for y in ry0..=ry1 {
+            for i in y * w + rx0..=y * w + rx1 {
+                if labels[i] != 0 {
+                    d[i] = inf;
+                }
             }
         }
         let at = |d: &Vec<u32>, x: i64, y: i64| -> u32 {
-            if x < 0 || y < 0 || x >= w as i64 || y >= h as i64 {
+            if x < rx0 as i64 || y < ry0 as i64 || x > rx1 as i64 || y > ry1 as i64 {
                 0
             } else {
                 d[y as usize * w + x as usize]
             }
         };
-        for y in 0..h as i64 {
-            for x in 0..w as i64 {
+        for y in ry0 as i64..=ry1 as i64 {
+            for x in rx0 as i64..=rx1 as i64 {
                 let i = y as usize * w + x as usize;
                 if d[i] == 0 {
                     continue;
@@ -263,8 +291,8 @@ impl BlobFinder {
                 d[i] = v;
             }
         }
-        for y in (0..h as i64).rev() {
-            for x in (0..w as i64).rev() {
+        for y in (ry0 as i64..=ry1 as i64).rev() {
+            for x in (rx0 as i64..=rx1 as i64).rev() {
                 let i = y as usize * w + x as usize;
                 if d[i] == 0 {
                     continue;
@@ -279,7 +307,7 @@ impl BlobFinder {
         }
         self.deepest.clear();
         self.deepest.resize(out.len() - first_out, (0, 0));
-        for i in 0..w * h {
+        for i in (ry0..=ry1).flat_map(|y| y * w + rx0..=y * w + rx1) {
             if let Some(Some(o)) = self.label_out.get(labels[i] as usize) {
                 let slot = &mut self.deepest[o - first_out];
                 if d[i] > slot.0 {
@@ -295,8 +323,8 @@ impl BlobFinder {
         let ring: Vec<(f64, f64)> = (0..RING_SAMPLES)
             .map(|k| (std::f64::consts::TAU * k as f64 / RING_SAMPLES as f64).sin_cos())
             .collect();
-        for y in 1..h.saturating_sub(1) {
-            for x in 1..w - 1 {
+        for y in ry0.max(1)..=ry1.min(h.saturating_sub(2)) {
+            for x in rx0.max(1)..=rx1.min(w.saturating_sub(2)) {
                 let i = y * w + x;
                 let di = d[i];
                 if di < 6 {

@@ -4,7 +4,7 @@
 //! module's job: this one only has to be right to a fraction of a pixel.
 
 use crate::measure::ellipse::{Conic, Ellipse};
-use nalgebra::{Matrix3, Matrix6, Vector6};
+use nalgebra::{Matrix3, Matrix5, Matrix6, Vector5, Vector6};
 use rand::Rng;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -58,6 +58,32 @@ pub fn fit_conic(points: &[[f64; 2]]) -> Option<Conic> {
     Some(Conic::from_matrix(&m))
 }
 
+/// The conic through five points, solved directly (a 5 x 5 system with
+/// F = 1 in coordinates centred on the points: F = 0 would put their centroid
+/// on the conic, impossible for an ellipse).
+pub fn conic_through_five(points: &[[f64; 2]; 5]) -> Option<Conic> {
+    let (mx, my) = points
+        .iter()
+        .fold((0.0, 0.0), |(x, y), p| (x + p[0] / 5.0, y + p[1] / 5.0));
+    let mut m = Matrix5::<f64>::zeros();
+    for (r, p) in points.iter().enumerate() {
+        let (x, y) = (p[0] - mx, p[1] - my);
+        m.set_row(r, &nalgebra::RowVector5::new(x * x, x * y, y * y, x, y));
+    }
+    let v = m.lu().solve(&-Vector5::repeat(1.0))?;
+    let centred = Conic {
+        a: v[0],
+        b: v[1],
+        c: v[2],
+        d: v[3],
+        e: v[4],
+        f: 1.0,
+    };
+    let t = Matrix3::new(1.0, 0.0, -mx, 0.0, 1.0, -my, 0.0, 0.0, 1.0);
+    let conic = Conic::from_matrix(&(t.transpose() * centred.matrix() * t));
+    conic.a.is_finite().then_some(conic)
+}
+
 /// The ellipse of [`fit_conic`].
 pub fn fit_ellipse(points: &[[f64; 2]]) -> Option<Ellipse> {
     fit_conic(points)?.to_ellipse()
@@ -84,24 +110,33 @@ pub fn ransac_ellipse(
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let mut best: Option<(usize, Ellipse)> = None;
     let mut sample = [[0.0; 2]; 5];
-    for _ in 0..iterations {
+    let mut needed = iterations;
+    let mut k = 0;
+    while k < needed.min(iterations) {
+        k += 1;
         for slot in sample.iter_mut() {
             *slot = points[rng.random_range(0..points.len())];
         }
-        let Some(conic) = fit_conic(&sample) else {
+        let Some(conic) = conic_through_five(&sample) else {
             continue;
         };
-        if conic.to_ellipse().is_none() {
+        // An ellipse: B^2 - 4AC < 0.
+        if conic.b * conic.b - 4.0 * conic.a * conic.c >= 0.0 {
             continue;
         }
         let count = points
             .iter()
             .filter(|p| conic.sampson_distance(p[0], p[1]) <= tolerance_px)
             .count();
-        if best.as_ref().is_none_or(|(c, _)| count > *c) {
-            if let Some(e) = conic.to_ellipse() {
-                best = Some((count, e));
-            }
+        if best.as_ref().is_none_or(|(c, _)| count > *c)
+            && let Some(e) = conic.to_ellipse()
+        {
+            best = Some((count, e));
+            // Enough draws for a 99 % chance of one all-inlier sample at the
+            // best inlier share seen so far.
+            let w = count as f64 / points.len() as f64;
+            let p_good = w.powi(5).clamp(1e-9, 1.0 - 1e-12);
+            needed = ((0.01f64).ln() / (1.0 - p_good).ln()).ceil().max(1.0) as usize;
         }
     }
     let (_, model) = best?;
@@ -143,6 +178,14 @@ mod tests {
         let truth = Ellipse::new(412.3, 287.9, 95.0, 51.5, 0.61);
         let pts: Vec<[f64; 2]> = (0..40).map(|k| truth.point_at(k as f64 * 0.157)).collect();
         let e = fit_ellipse(&pts).unwrap();
+        assert!(truth.max_param_error_px(&e) < 1e-6, "{e:?}");
+    }
+
+    #[test]
+    fn five_points_determine_the_ellipse() {
+        let truth = Ellipse::new(-40.0, 700.0, 33.0, 12.0, 1.1);
+        let pts = [0.1, 1.3, 2.0, 3.9, 5.0].map(|t| truth.point_at(t));
+        let e = conic_through_five(&pts).unwrap().to_ellipse().unwrap();
         assert!(truth.max_param_error_px(&e) < 1e-6, "{e:?}");
     }
 

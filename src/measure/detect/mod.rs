@@ -85,6 +85,10 @@ pub struct RimCandidate {
     pub ellipse_px: Ellipse,
 }
 
+/// Rim ray spacing while candidates are compared, in multiples of the
+/// configured spacing.
+const SCOUT_SPACING_FACTOR: f64 = 3.0;
+
 /// Where and how large a coarse candidate is, full-res distorted pixels.
 #[derive(Clone, Debug)]
 struct Seed {
@@ -155,10 +159,10 @@ impl Detector {
         if image.width() < 8 || image.height() < 8 {
             return None;
         }
-        if let Some(h) = hint.filter(|h| h.a.is_finite() && h.b > 0.5 && h.a < 1e5) {
-            if let Some(v) = self.verify_near(image, h, true) {
-                return Some(v.into_candidate());
-            }
+        if let Some(h) = hint.filter(|h| h.a.is_finite() && h.b > 0.5 && h.a < 1e5)
+            && let Some(v) = self.verify_settled(image, h, self.cfg.rim_point_spacing_px)
+        {
+            return Some(v.into_candidate());
         }
         self.search_full(image).map(Verified::into_candidate)
     }
@@ -184,7 +188,7 @@ impl Detector {
         blobs.retain(|b| b.a_px >= 0.5 * self.min_radius_px && b.b_px >= 0.5);
         // Larger dark regions first: small ones are mostly noise and thin
         // shapes, and the budget of candidates is limited.
-        blobs.sort_by(|x, y| y.area.cmp(&x.area));
+        blobs.sort_by_key(|b| std::cmp::Reverse(b.area));
         // Drop near-duplicates (the same region at several thresholds).
         let mut kept: Vec<Blob> = Vec::new();
         for b in blobs.drain(..) {
@@ -241,19 +245,10 @@ impl Detector {
             }
             for (j, seed) in seeds.iter().enumerate() {
                 let r = self.verify_seed(image, seed, 3 * i as u64 + j as u64);
-                if std::env::var_os("DETECT_DEBUG").is_some() {
-                    eprintln!(
-                        "seed {seed:?} ring {:.2} {:?} {:.1} -> {:?}",
-                        b.ringed_light,
-                        b.ringed_px,
-                        b.ringed_radius_px,
-                        r.as_ref().map(|v| (v.ellipse, v.score))
-                    );
-                }
-                if let Some(v) = r {
-                    if best.as_ref().is_none_or(|bv| v.score > bv.score) {
-                        best = Some(v);
-                    }
+                if let Some(v) = r
+                    && best.as_ref().is_none_or(|bv| v.score > bv.score)
+                {
+                    best = Some(v);
                 }
             }
             if best
@@ -264,18 +259,23 @@ impl Detector {
             }
         }
         self.blobs = kept;
-        best
+        let scouted = best?;
+        let spacing = self.cfg.rim_point_spacing_px;
+        Some(
+            self.verify_settled(image, &scouted.ellipse, spacing)
+                .unwrap_or(scouted),
+        )
     }
 
     /// Verifies a coarse seed: a wide ray pass from its centre, a robust
     /// fit, then the narrow pass around that fit.
     fn verify_seed(&mut self, image: &GrayImage, seed: &Seed, index: u64) -> Option<Verified> {
-        let rays = 64;
+        let rays = 48;
         let mut points = Vec::with_capacity(rays);
         let c = seed.centre_px;
-        // The disc's axis ratio is at least min_axis_ratio: an elongated
-        // region (disc plus hose or probe) is not searched along its length.
-        let longest = seed.b_px / self.cfg.min_axis_ratio.clamp(0.05, 1.0);
+        // An elongated region (disc plus hose or probe) is not searched
+        // along its length: the disc is across it.
+        let longest = 2.0 * seed.b_px;
         for k in 0..rays {
             let phi = TAU * k as f64 / rays as f64;
             let r = polar_radius(seed.a_px, seed.b_px, seed.theta, phi).min(longest);
@@ -283,7 +283,7 @@ impl Detector {
             let s_max = seed.reach * r + 4.0;
             // About a pixel of accuracy is enough here: coarser steps on
             // large seeds.
-            let step = (r / 60.0).clamp(0.5, 1.0);
+            let step = (r / 40.0).clamp(0.5, 2.0);
             rim::profile(image, c, dir, 1.0, s_max, step, &mut self.profile);
             if let Some(e) =
                 rim::strongest_rise(&self.profile, 1.0, step, self.cfg.min_contrast_gray as f32)
@@ -293,12 +293,7 @@ impl Detector {
             }
         }
         if points.len() < 8 {
-            {
-                if std::env::var_os("DETECT_DEBUG").is_some() {
-                    eprintln!("reject at line 275");
-                }
-                return None;
-            }
+            return None;
         }
         let scale = seed.b_px.max(1.0);
         let tolerance = (0.03 * scale).max(1.0);
@@ -316,25 +311,18 @@ impl Detector {
                 n as f64 >= 0.8 * points.len() as f64
             })
             .or_else(|| {
-                conic_fit::ransac_ellipse(&points, tolerance, 150, self.cfg.seed ^ index)
+                conic_fit::ransac_ellipse(&points, tolerance, 300, self.cfg.seed ^ index)
             })?;
         if !self.plausible(&first, 0.5) {
-            {
-                if std::env::var_os("DETECT_DEBUG").is_some() {
-                    eprintln!("reject at line 296");
-                }
-                return None;
-            }
+            return None;
         }
-        let mut v = self.verify_near(image, &first, false)?;
-        // A centre that moved a lot (the first pass started off the disc):
-        // one more narrow pass from the new centre.
-        let moved = (v.ellipse.cx - first.cx).hypot(v.ellipse.cy - first.cy);
-        if moved > 0.1 * v.ellipse.b {
-            let again = v.ellipse;
-            v = self.verify_near(image, &again, false)?;
-        }
-        Some(v)
+        // Candidates are compared on a sparser rim (cheaper); the winner
+        // gets the full density.
+        self.verify_settled(
+            image,
+            &first,
+            SCOUT_SPACING_FACTOR * self.cfg.rim_point_spacing_px,
+        )
     }
 
     /// Size and shape plausible for the disc (`slack` widens the limits).
@@ -348,15 +336,36 @@ impl Detector {
 
     /// Narrow ray pass around an ellipse (undistorted pixels), robust refit,
     /// and the evidence score.
+    /// [`Self::verify_near`], repeated from its own result while that moves
+    /// by more than half a pixel (the narrow search is centred on the start
+    /// ellipse: a start a few pixels off gives edges near the window's ends).
+    fn verify_settled(
+        &mut self,
+        image: &GrayImage,
+        start: &Ellipse,
+        spacing_px: f64,
+    ) -> Option<Verified> {
+        let mut v = self.verify_near(image, start, spacing_px)?;
+        let mut previous = *start;
+        for _ in 0..2 {
+            if v.ellipse.max_param_error_px(&previous) <= 0.5 {
+                break;
+            }
+            previous = v.ellipse;
+            v = self.verify_near(image, &previous, spacing_px)?;
+        }
+        Some(v)
+    }
+
     fn verify_near(
         &mut self,
         image: &GrayImage,
         start: &Ellipse,
-        tracked: bool,
+        spacing_px: f64,
     ) -> Option<Verified> {
         let centre = self.camera.distort_px([start.cx, start.cy]);
         let perimeter = TAU * ((start.a * start.a + start.b * start.b) / 2.0).sqrt();
-        let rays = ((perimeter / self.cfg.rim_point_spacing_px.max(0.1)) as usize)
+        let rays = ((perimeter / spacing_px.max(0.1)) as usize)
             .clamp(24, self.cfg.max_rim_points.max(24) as usize);
         let min_contrast = self.cfg.min_contrast_gray as f32;
         let (w, h) = (f64::from(image.width()), f64::from(image.height()));
@@ -392,24 +401,14 @@ impl Detector {
             }
         }
         if rays_in_image < rays / 4 || undistorted.len() < self.cfg.min_rim_points as usize {
-            {
-                if std::env::var_os("DETECT_DEBUG").is_some() {
-                    eprintln!("reject at line 364");
-                }
-                return None;
-            }
+            return None;
         }
         let tol = self.cfg.inlier_tolerance_px.max(0.1);
         let coarse_tol = (0.05 * start.b).max(3.0 * tol);
         let ellipse = conic_fit::refine(start, &undistorted, coarse_tol, 2)
             .and_then(|e| conic_fit::refine(&e, &undistorted, tol, 2))?;
         if !self.plausible(&ellipse, 1.0) {
-            {
-                if std::env::var_os("DETECT_DEBUG").is_some() {
-                    eprintln!("reject at line 371");
-                }
-                return None;
-            }
+            return None;
         }
         let mut residuals = Vec::new();
         conic_fit::residuals(&ellipse, &undistorted, &mut residuals);
@@ -417,22 +416,12 @@ impl Detector {
             .filter(|&i| residuals[i] <= tol)
             .collect();
         if inliers.len() < self.cfg.min_rim_points as usize {
-            {
-                if std::env::var_os("DETECT_DEBUG").is_some() {
-                    eprintln!("reject at line 379");
-                }
-                return None;
-            }
+            return None;
         }
         let mut inlier_contrast: Vec<f64> = inliers.iter().map(|&i| contrasts[i]).collect();
         let rim_contrast = median(&mut inlier_contrast);
         if rim_contrast < self.cfg.min_contrast_gray {
-            {
-                if std::env::var_os("DETECT_DEBUG").is_some() {
-                    eprintln!("reject at line 384");
-                }
-                return None;
-            }
+            return None;
         }
         // Dark inside: one dark surface (shaded, but far less than the
         // rim's step), not a patchwork that happens to have edges on an ellipse.
@@ -440,12 +429,7 @@ impl Detector {
         darks.sort_by(f64::total_cmp);
         let (q1, q3) = (darks[darks.len() / 4], darks[3 * darks.len() / 4]);
         if q3 - q1 > 0.25 * rim_contrast {
-            {
-                if std::env::var_os("DETECT_DEBUG").is_some() {
-                    eprintln!("reject at line 392");
-                }
-                return None;
-            }
+            return None;
         }
         let shape = inliers.len() as f64 / rays_in_image as f64;
 
@@ -478,23 +462,12 @@ impl Detector {
             && ellipse.a >= self.cfg.canopy_required_from_px
             && canopy < self.cfg.min_canopy_fraction
         {
-            {
-                if std::env::var_os("DETECT_DEBUG").is_some() {
-                    eprintln!("reject at line 425");
-                }
-                return None;
-            }
+            return None;
         }
         let w = self.cfg.canopy_weight.clamp(0.0, 1.0);
         let score = (shape * ((1.0 - w) + w * canopy)).clamp(0.0, 1.0);
-        let _ = tracked;
         if score < self.cfg.min_score {
-            {
-                if std::env::var_os("DETECT_DEBUG").is_some() {
-                    eprintln!("reject at line 431");
-                }
-                return None;
-            }
+            return None;
         }
         // Keep the points near the ellipse: the probe and hose outlines are
         // the fit's outliers, and fewer of them is better.

@@ -64,10 +64,11 @@ impl Scene {
     }
 
     fn level(&self, u: f64, v: f64) -> f64 {
-        if let Some((from, half_width, level)) = self.bar {
-            if v >= from[1] && (u - from[0]).abs() <= half_width {
-                return level;
-            }
+        if let Some((from, half_width, level)) = self.bar
+            && v >= from[1]
+            && (u - from[0]).abs() <= half_width
+        {
+            return level;
         }
         for r in &self.rects {
             if u >= r[0] && u <= r[2] && v >= r[1] && v <= r[3] {
