@@ -110,8 +110,12 @@ fn inputs() -> Vec<(Arc<Frame>, Arc<Measurement>, serde_json::Value)> {
                 position_ned: [0.0; 3],
                 receiver_position_ned: [0.0; 3],
                 receiver_q_ned_body: [1.0, 0.0, 0.0, 0.0],
+                capture_time_ns: 1_795_341_600_000_000_000 + seq * 33_333_333,
+                canopy_radius: 0.33,
+                visible_rim_frac: 1.0,
+                coupled: false,
             };
-            let t = 1_795_341_600_000_000_000 + seq * 33_333_333;
+            let t = truth.capture_time_ns;
             let frame = Frame {
                 seq,
                 capture_time_ns: t,

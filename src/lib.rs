@@ -13,3 +13,4 @@ pub mod link;
 pub mod log;
 pub mod measure;
 pub mod record;
+pub mod source;

@@ -2,13 +2,18 @@
 
 use clap::{Parser, Subcommand};
 use drogue_vision::commands;
+use drogue_vision::config::Config;
+use drogue_vision::log::LogLayer;
 use std::process::ExitCode;
+use tracing_subscriber::layer::SubscriberExt;
+use tracing_subscriber::util::SubscriberInitExt;
+use tracing_subscriber::{EnvFilter, Registry, reload};
 
 #[derive(Parser)]
 #[command(
     name = "drogue-vision",
     version,
-    about = "Drogue pose from one camera, streamed to ArduPilot/PX4 over MAVLink"
+    about = "Drogue pose from one camera, streamed to ArduPilot/PX4 over MAVLink, logged to MCAP"
 )]
 struct Cli {
     #[command(subcommand)]
@@ -17,6 +22,8 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
+    /// The live pipeline: frames in, pose out over MAVLink, everything logged.
+    Run(commands::run::RunArgs),
     /// Offline measurement of a folder of images or an MCAP log, to JSON lines.
     Process(commands::process::ProcessArgs),
     /// Post-flight review of an MCAP log: summary, poses.csv and plots.
@@ -27,16 +34,29 @@ enum Command {
     Sim(commands::sim::SimArgs),
 }
 
-fn init_tracing() {
-    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
-        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info"));
-    tracing_subscriber::fmt()
-        .with_env_filter(filter)
-        .with_writer(std::io::stderr)
+/// Where `run` plugs the MCAP `/log` layer in once the log is open.
+type LogSlot = reload::Handle<Option<LogLayer>, Registry>;
+
+/// tracing to stderr (filter from `RUST_LOG`, default `info`), plus a slot
+/// for the flight log's layer, so the same events reach MCAP `/log`.
+fn init_tracing() -> LogSlot {
+    let (slot, handle) = reload::Layer::new(None::<LogLayer>);
+    let filter = EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new("info"));
+    tracing_subscriber::registry()
+        .with(slot)
+        .with(tracing_subscriber::fmt::layer().with_writer(std::io::stderr))
+        .with(filter)
         .init();
+    handle
 }
 
-/// Exit 2 when the input is unusable, 1 when the output could not be written.
+/// Exit status 2: nothing could start (arguments, config, files).
+fn setup_failure(e: impl std::fmt::Display) -> ExitCode {
+    eprintln!("error: {e}");
+    ExitCode::from(2)
+}
+
+/// Exit status of a log command: 2 for unusable input, 1 for I/O failures.
 fn log_error_exit(e: drogue_vision::log::LogError) -> ExitCode {
     eprintln!("error: {e}");
     match e {
@@ -47,10 +67,34 @@ fn log_error_exit(e: drogue_vision::log::LogError) -> ExitCode {
     }
 }
 
+fn run(args: commands::run::RunArgs, slot: LogSlot) -> ExitCode {
+    let config = match Config::load(args.config.as_deref()) {
+        Ok(c) => c,
+        Err(e) => return setup_failure(e),
+    };
+    let plug_log = |log: &drogue_vision::log::LogHandle| {
+        if let Err(e) = slot.reload(Some(log.tracing_layer())) {
+            tracing::warn!("tracing events will not reach the MCAP /log topic: {e}");
+        }
+    };
+    match commands::run::run(&args, config, plug_log) {
+        Ok(s) => {
+            eprintln!("{}", s.report());
+            ExitCode::SUCCESS
+        }
+        Err(e @ commands::run::RunError::Setup(_)) => setup_failure(e),
+        Err(e) => {
+            eprintln!("error: {e}");
+            ExitCode::from(1)
+        }
+    }
+}
+
 fn main() -> ExitCode {
-    init_tracing();
+    let slot = init_tracing();
     let cli = Cli::parse();
     match cli.command {
+        Command::Run(args) => run(args, slot),
         Command::Process(args) => match commands::process::run(&args) {
             Ok(s) => {
                 eprintln!(
@@ -63,10 +107,7 @@ fn main() -> ExitCode {
                 eprintln!("error: {e}");
                 ExitCode::from(1)
             }
-            Err(e) => {
-                eprintln!("error: {e}");
-                ExitCode::from(2)
-            }
+            Err(e) => setup_failure(e),
         },
         Command::Review(args) => match commands::review::run(&args) {
             Ok(report) => {

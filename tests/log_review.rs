@@ -69,7 +69,7 @@ fn review_counts_rates_latencies_link_and_errors_by_range() {
     assert!((r.detection_rate() - detected as f64 / n as f64).abs() < 1e-12);
 
     // Latency and processing percentiles against the values written.
-    let latencies: Vec<f64> = logged_seqs().map(|s| 2.0 + (s % 10) as f64 * 0.5).collect();
+    let latencies: Vec<f64> = logged_seqs().map(s::latency_ms).collect();
     let processing: Vec<f64> = logged_seqs()
         .map(|s| f64::from(1600 + (s as u32 % 10) * 100) / 1000.0)
         .collect();

@@ -3,4 +3,5 @@
 pub mod process;
 pub mod recover;
 pub mod review;
+pub mod run;
 pub mod sim;

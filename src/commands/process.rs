@@ -4,12 +4,14 @@
 use crate::camera::CameraModel;
 use crate::config::Config;
 use crate::frame::{Frame, FrameOrigin};
-use crate::image_io::{is_image_path, read_gray8};
+use crate::image_io::read_gray8;
+use crate::log::replay::{self, ReplayReader};
 use crate::measure::Measurer;
 use crate::record::DetectionRecord;
+use crate::source::dir::list_images;
 use indicatif::{ProgressBar, ProgressStyle};
 use std::io::{BufWriter, Write};
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::time::Instant;
 
 /// Frame period assumed for a folder of images (their capture times are not
@@ -26,9 +28,10 @@ file or input."
 pub struct ProcessArgs {
     /// A folder of images (png, jpg, pgm, bmp; lexicographic order) or an MCAP log.
     pub input: PathBuf,
-    /// Camera file (ROS camera_info or OpenCV YAML).
+    /// Camera file (ROS camera_info or OpenCV YAML); required for a folder,
+    /// optional for a log (default: the log's /camera/calibration).
     #[arg(long)]
-    pub camera: PathBuf,
+    pub camera: Option<PathBuf>,
     /// Radius of the drogue's dark inner circle, metres (overrides the config).
     #[arg(long)]
     pub radius: Option<f64>,
@@ -67,34 +70,73 @@ pub enum ProcessError {
     Output { path: String, message: String },
 }
 
-/// Image files of a folder in lexicographic order, and the count of others.
-fn list_images(dir: &Path) -> Result<(Vec<PathBuf>, usize), ProcessError> {
-    let entries = std::fs::read_dir(dir)
-        .map_err(|e| ProcessError::Setup(format!("input {}: {e}", dir.display())))?;
-    let mut images = Vec::new();
-    let mut skipped = 0;
-    for entry in entries {
-        let path = entry
-            .map_err(|e| ProcessError::Setup(format!("input {}: {e}", dir.display())))?
-            .path();
-        if path.is_file() && is_image_path(&path) {
-            images.push(path);
-        } else if path.is_file() {
-            skipped += 1;
-        }
-    }
-    images.sort();
-    Ok((images, skipped))
-}
-
 fn progress_bar(len: u64) -> ProgressBar {
-    let bar = ProgressBar::new(len);
+    let bar = if len > 0 {
+        ProgressBar::new(len)
+    } else {
+        ProgressBar::new_spinner()
+    };
     if let Ok(style) =
         ProgressStyle::with_template("{bar:40} {pos}/{len} frames  {per_sec}  eta {eta}")
     {
         bar.set_style(style);
     }
     bar
+}
+
+/// Frames of the input, each named for its record (file name, or sequence
+/// number for a log), or the reason it could not be read.
+type NamedFrames = Box<dyn Iterator<Item = (String, Result<Frame, String>)>>;
+
+/// Opens the input: its frames, camera, count of skipped non-image files and
+/// frame count for the progress bar (0: unknown).
+fn open_input(args: &ProcessArgs) -> Result<(NamedFrames, CameraModel, usize, u64), ProcessError> {
+    let setup = |e: String| ProcessError::Setup(e);
+    let given_camera = args
+        .camera
+        .as_deref()
+        .map(CameraModel::load)
+        .transpose()
+        .map_err(|e| setup(e.to_string()))?;
+    if args.input.is_dir() {
+        let camera =
+            given_camera.ok_or_else(|| setup("a folder of images needs --camera".into()))?;
+        let (images, skipped) = list_images(&args.input).map_err(|e| setup(e.to_string()))?;
+        let total = images.len() as u64;
+        let frames = images.into_iter().enumerate().map(|(seq, path)| {
+            let name = path
+                .file_name()
+                .map(|n| n.to_string_lossy().into_owned())
+                .unwrap_or_default();
+            let frame = read_gray8(&path).map(|image| Frame {
+                seq: seq as u64,
+                capture_time_ns: seq as u64 * FOLDER_FRAME_PERIOD_NS,
+                image,
+                origin: FrameOrigin::File(path.clone()),
+            });
+            (name, frame)
+        });
+        return Ok((Box::new(frames), camera, skipped, total));
+    }
+    if args.input.is_file() {
+        // An MCAP log: replay its /camera/image with its own camera unless
+        // --camera overrides it.
+        let input = args.input.display().to_string();
+        let camera = match given_camera {
+            Some(c) => c,
+            None => ReplayReader::first_camera(&args.input).map_err(|e| setup(e.to_string()))?,
+        };
+        let reader = replay::open(&args.input).map_err(|e| setup(format!("input {input}: {e}")))?;
+        let frames = reader.enumerate().map(|(i, item)| match item {
+            Ok(frame) => (frame.seq.to_string(), Ok(frame)),
+            Err(e) => (format!("#{i}"), Err(e.to_string())),
+        });
+        return Ok((Box::new(frames), camera, 0, 0));
+    }
+    Err(setup(format!(
+        "input {}: neither a folder of images nor an MCAP log",
+        args.input.display()
+    )))
 }
 
 /// Runs `process`. Progress on stderr when it is a terminal.
@@ -110,14 +152,7 @@ pub fn run(args: &ProcessArgs) -> Result<ProcessSummary, ProcessError> {
         }
         config.drogue.inner_radius_m = r;
     }
-    let camera = CameraModel::load(&args.camera).map_err(|e| setup(e.to_string()))?;
-    if !args.input.is_dir() {
-        return Err(setup(format!(
-            "input {}: not a folder of images",
-            args.input.display()
-        )));
-    }
-    let (images, skipped) = list_images(&args.input)?;
+    let (frames, camera, skipped, total) = open_input(args)?;
     let mut measurer = Measurer::new(camera, &config).map_err(|e| setup(e.to_string()))?;
 
     let out_err = |e: std::io::Error| ProcessError::Output {
@@ -125,33 +160,23 @@ pub fn run(args: &ProcessArgs) -> Result<ProcessSummary, ProcessError> {
         message: e.to_string(),
     };
     let mut out = BufWriter::new(std::fs::File::create(&args.out).map_err(out_err)?);
-    let bar = progress_bar(images.len() as u64);
+    let bar = progress_bar(total);
     let mut summary = ProcessSummary {
         skipped,
         ..Default::default()
     };
     let mut measure_time = std::time::Duration::ZERO;
-    for (seq, path) in images.iter().enumerate() {
-        let name = path
-            .file_name()
-            .map(|n| n.to_string_lossy().into_owned())
-            .unwrap_or_default();
-        let record = match read_gray8(path) {
+    for (name, item) in frames {
+        let record = match item {
             Err(e) => {
                 summary.unreadable += 1;
                 tracing::warn!(frame = %name, "unreadable frame: {e}");
                 DetectionRecord::unreadable(name, e)
             }
-            Ok(image) => {
+            Ok(frame) => {
                 if args.independent {
                     measurer.forget_track();
                 }
-                let frame = Frame {
-                    seq: seq as u64,
-                    capture_time_ns: seq as u64 * FOLDER_FRAME_PERIOD_NS,
-                    image,
-                    origin: FrameOrigin::File(path.clone()),
-                };
                 let t = Instant::now();
                 let m = measurer.measure(&frame);
                 measure_time += t.elapsed();

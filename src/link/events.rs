@@ -2,14 +2,14 @@
 //! (`/mavlink/out`, `/mavlink/in`). The link never waits for the logger: when
 //! the consumer falls behind, the oldest events go and are counted.
 
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use std::collections::VecDeque;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Condvar, Mutex};
 use std::time::Duration;
 
 /// One MAVLink message sent or received, decoded.
-#[derive(Clone, Debug, PartialEq, Serialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct LinkEvent {
     /// When it was written to / read from the transport, ns since the Unix epoch.
     pub time_ns: u64,

@@ -94,6 +94,10 @@ pub fn truth(seq: u64) -> FrameTruth {
         position_ned: [100.0, 0.0, -50.0],
         receiver_position_ned: [80.0, 0.0, -50.0],
         receiver_q_ned_body: [1.0, 0.0, 0.0, 0.0],
+        capture_time_ns: time_ns(seq),
+        canopy_radius: 0.33,
+        visible_rim_frac: 1.0,
+        coupled: false,
     }
 }
 
@@ -169,10 +173,12 @@ pub fn error_m(seq: u64) -> f64 {
 }
 
 pub fn detection_json(m: &Measurement) -> serde_json::Value {
-    let mut v =
-        serde_json::to_value(DetectionRecord::from_measurement(m.seq.to_string(), m)).unwrap();
-    v["latency_ms"] = serde_json::json!(2.0 + (m.seq % 10) as f64 * 0.5);
-    v
+    serde_json::to_value(DetectionRecord::from_measurement(m.seq.to_string(), m)).unwrap()
+}
+
+/// Capture → send latency built into outgoing [`link_event`]s, milliseconds.
+pub fn latency_ms(i: u64) -> f64 {
+    2.0 + (i % 10) as f64 * 0.5
 }
 
 pub fn mount() -> MountTransforms {
@@ -187,7 +193,12 @@ pub fn mount() -> MountTransforms {
 
 pub fn link_event(i: u64, outgoing: bool) -> LinkEvent {
     LinkEvent {
-        time_ns: time_ns(i) + 2_000_000,
+        time_ns: time_ns(i)
+            + if outgoing {
+                (latency_ms(i) * 1e6) as u64
+            } else {
+                2_000_000
+            },
         outgoing,
         name: if outgoing {
             "LANDING_TARGET"

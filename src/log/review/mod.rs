@@ -35,8 +35,6 @@ struct DetectionLite {
     normal_camera: Option<[f64; 3]>,
     position_body: Option<[f64; 3]>,
     times_us: Option<TimesLite>,
-    /// Capture to pose sent, when the caller stamped it.
-    latency_ms: Option<f64>,
 }
 
 #[derive(Deserialize)]
@@ -55,6 +53,10 @@ struct TruthLite {
 #[derive(Deserialize)]
 struct LinkLite {
     name: String,
+    /// When the message went out, ns since the Unix epoch.
+    time_ns: Option<u64>,
+    /// Capture time of the frame a pose message was built from.
+    capture_time_ns: Option<u64>,
 }
 
 /// One frame for the plots (NaN where there is no value).
@@ -134,7 +136,7 @@ const CSV_HEADER: &str = "time_s,capture_time_ns,seq,detected,\
 position_camera_x_m,position_camera_y_m,position_camera_z_m,\
 normal_camera_x,normal_camera_y,normal_camera_z,\
 position_body_x_m,position_body_y_m,position_body_z_m,\
-processing_ms,latency_ms,\
+processing_ms,\
 truth_position_camera_x_m,truth_position_camera_y_m,truth_position_camera_z_m,\
 truth_normal_camera_x,truth_normal_camera_y,truth_normal_camera_z,\
 truth_range_m,position_error_m,normal_error_deg";
@@ -155,6 +157,7 @@ pub fn review(log: &Path, out_dir: &Path) -> Result<ReviewReport, LogError> {
     };
     let mut last_frame_seq: Option<u32> = None;
     let mut last_heartbeat: Option<u64> = None;
+    let mut last_sent_capture: Option<u64> = None;
     let mut pending_truth: VecDeque<(u64, TruthLite)> = VecDeque::new();
     let mut stride = 1usize;
     let mut since_kept = 0usize;
@@ -209,9 +212,6 @@ pub fn review(log: &Path, out_dir: &Path) -> Result<ReviewReport, LogError> {
                 if let Some(p) = processing {
                     r.processing_ms.add(p);
                 }
-                if let Some(l) = d.latency_ms {
-                    r.latency_ms.add(l);
-                }
                 // The truth of this frame has the same log time.
                 while pending_truth.front().is_some_and(|(tt, _)| *tt < t) {
                     pending_truth.pop_front();
@@ -237,14 +237,13 @@ pub fn review(log: &Path, out_dir: &Path) -> Result<ReviewReport, LogError> {
                 let time_s = t.saturating_sub(first_frame_ns.unwrap_or(t)) as f64 * 1e-9;
                 writeln!(
                     csv,
-                    "{time_s:.6},{t},{},{},{},{},{},{},{},{},{},{},{},{}",
+                    "{time_s:.6},{t},{},{},{},{},{},{},{},{},{},{},{}",
                     m.sequence,
                     u8::from(d.detected),
                     csv_xyz(d.position_camera),
                     csv_xyz(d.normal_camera),
                     csv_xyz(d.position_body),
                     csv_opt(processing),
-                    csv_opt(d.latency_ms),
                     csv_xyz(truth.map(|x| x.position_camera)),
                     csv_xyz(truth.map(|x| x.normal_camera)),
                     csv_opt(truth.map(|x| x.range_m)),
@@ -279,6 +278,15 @@ pub fn review(log: &Path, out_dir: &Path) -> Result<ReviewReport, LogError> {
                     continue;
                 };
                 let incoming = m.channel.topic == topics::MAVLINK_IN;
+                // Capture → send latency: the first pose message sent for a frame.
+                if !incoming
+                    && let (Some(sent), Some(captured)) = (l.time_ns, l.capture_time_ns)
+                    && last_sent_capture != Some(captured)
+                {
+                    last_sent_capture = Some(captured);
+                    r.latency_ms
+                        .add(sent.saturating_sub(captured) as f64 * 1e-6);
+                }
                 if incoming && l.name == "HEARTBEAT" {
                     r.heartbeats_in += 1;
                     if let Some(prev) = last_heartbeat {

@@ -1,0 +1,44 @@
+//! `mcap:` source: the `/camera/image` frames of a flight log, for replay.
+
+use super::{FrameSource, SourceError, SourceItem};
+use crate::camera::CameraModel;
+use crate::log::replay::{self, ReplayReader};
+use crate::measure::mount::MountConfig;
+use std::path::Path;
+
+/// Reads a log's frames back with their recorded capture times.
+pub struct McapSource {
+    reader: ReplayReader,
+    camera: CameraModel,
+}
+
+impl McapSource {
+    pub fn open(path: &Path) -> Result<Self, SourceError> {
+        let open_err = |e: crate::log::LogError| SourceError::Open {
+            source_name: format!("mcap:{}", path.display()),
+            message: e.to_string(),
+        };
+        Ok(Self {
+            camera: ReplayReader::first_camera(path).map_err(open_err)?,
+            reader: replay::open(path).map_err(open_err)?,
+        })
+    }
+}
+
+impl FrameSource for McapSource {
+    fn camera(&self) -> Option<CameraModel> {
+        Some(self.camera.clone())
+    }
+    fn mount(&self) -> Option<MountConfig> {
+        None
+    }
+    fn fps(&self) -> Option<f64> {
+        None
+    }
+    fn recorded_timeline(&self) -> bool {
+        true
+    }
+    fn next_frame(&mut self) -> Option<SourceItem> {
+        self.reader.next().map(|r| r.map_err(|e| e.to_string()))
+    }
+}

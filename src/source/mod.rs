@@ -1,0 +1,102 @@
+//! Frame sources for `run`: the simulator, a folder of images, an MCAP log.
+
+pub mod dir;
+pub mod mcap;
+pub mod sim;
+
+use crate::camera::CameraModel;
+use crate::frame::Frame;
+use crate::measure::mount::MountConfig;
+use std::path::PathBuf;
+
+/// A source address as given on the command line or in `[run] source`.
+#[derive(Clone, Debug, PartialEq)]
+pub enum SourceSpec {
+    /// `sim:NAME_OR_FILE`: a built-in scenario or a scenario file.
+    Sim(String),
+    /// `dir:PATH`: the images of a folder, in lexicographic order.
+    Dir(PathBuf),
+    /// `mcap:PATH`: the `/camera/image` frames of a log.
+    Mcap(PathBuf),
+    /// `v4l:/dev/videoN`: a V4L2 camera.
+    V4l(String),
+}
+
+/// A source address that could not be used.
+#[derive(Debug, thiserror::Error)]
+pub enum SourceError {
+    #[error("source `{0}`: expected sim:NAME_OR_FILE, dir:PATH, mcap:PATH or v4l:/dev/videoN")]
+    BadAddress(String),
+    #[error("source {source_name}: {message}")]
+    Open {
+        source_name: String,
+        message: String,
+    },
+}
+
+impl std::str::FromStr for SourceSpec {
+    type Err = SourceError;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        let bad = || SourceError::BadAddress(s.to_string());
+        let (kind, rest) = s.split_once(':').ok_or_else(bad)?;
+        if rest.is_empty() {
+            return Err(bad());
+        }
+        match kind {
+            "sim" => Ok(Self::Sim(rest.to_string())),
+            "dir" => Ok(Self::Dir(PathBuf::from(rest))),
+            "mcap" => Ok(Self::Mcap(PathBuf::from(rest))),
+            "v4l" => Ok(Self::V4l(rest.to_string())),
+            _ => Err(bad()),
+        }
+    }
+}
+
+/// One item a source yields: a frame, or a frame it could not read (reported
+/// and skipped by the pipeline).
+pub type SourceItem = Result<Frame, String>;
+
+/// What every source offers the pipeline.
+pub trait FrameSource: Send {
+    /// The camera of this source, when it knows it (the simulator, a log).
+    fn camera(&self) -> Option<CameraModel>;
+    /// The camera mount of this source, when it knows it (the simulator).
+    fn mount(&self) -> Option<MountConfig>;
+    /// Nominal frame rate, when known (for pacing and staleness).
+    fn fps(&self) -> Option<f64>;
+    /// Whether the frames' capture times form a timeline to replay at its
+    /// own pace (the simulator, a log); a folder of images has none.
+    fn recorded_timeline(&self) -> bool {
+        false
+    }
+    /// The next frame; `None` at the end of the source.
+    fn next_frame(&mut self) -> Option<SourceItem>;
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn parses_addresses() {
+        assert_eq!(
+            "sim:approach".parse::<SourceSpec>().ok(),
+            Some(SourceSpec::Sim("approach".into()))
+        );
+        assert_eq!(
+            "dir:/tmp/x".parse::<SourceSpec>().ok(),
+            Some(SourceSpec::Dir("/tmp/x".into()))
+        );
+        assert_eq!(
+            "mcap:a.mcap".parse::<SourceSpec>().ok(),
+            Some(SourceSpec::Mcap("a.mcap".into()))
+        );
+        assert_eq!(
+            "v4l:/dev/video0".parse::<SourceSpec>().ok(),
+            Some(SourceSpec::V4l("/dev/video0".into()))
+        );
+        for bad in ["approach", "sim:", "usb:/dev/x", ""] {
+            assert!(bad.parse::<SourceSpec>().is_err(), "{bad}");
+        }
+    }
+}

@@ -1,0 +1,166 @@
+//! Cross-check against frames from an independent renderer
+//! (`../shared/data/reference`, path in `DROGUE_REFERENCE_DIR`).
+//!
+//! When the variable is not set these tests say so and pass; when it is set
+//! and the folder is missing they fail.
+
+mod common;
+
+use common::{FrameErrors, Truth, errors, med_p95, report};
+use drogue_vision::camera::CameraModel;
+use drogue_vision::config::Config;
+use drogue_vision::frame::{Frame, FrameOrigin};
+use drogue_vision::image_io::read_gray8;
+use drogue_vision::measure::Measurer;
+use std::path::{Path, PathBuf};
+
+fn reference_dir() -> Option<PathBuf> {
+    match std::env::var_os("DROGUE_REFERENCE_DIR") {
+        None => {
+            eprintln!("DROGUE_REFERENCE_DIR is not set: reference cross-check skipped");
+            None
+        }
+        Some(d) => {
+            let d = PathBuf::from(d);
+            assert!(
+                d.is_dir(),
+                "DROGUE_REFERENCE_DIR={} is not a folder",
+                d.display()
+            );
+            Some(d)
+        }
+    }
+}
+
+fn truths(set: &Path) -> Vec<Truth> {
+    let text = std::fs::read_to_string(set.join("truth.jsonl")).expect("truth.jsonl");
+    text.lines()
+        .filter(|l| !l.trim().is_empty())
+        .map(|l| serde_json::from_str(l).expect("truth line"))
+        .collect()
+}
+
+/// Measures every frame of a set as an unrelated view; (truth, errors or None).
+fn measure_set(set: &Path, config: &Config) -> Vec<(Truth, Option<FrameErrors>, bool)> {
+    let camera = CameraModel::load(&set.join("camera.yaml")).expect("camera.yaml");
+    let mut measurer = Measurer::new(camera, config).expect("measurer");
+    truths(set)
+        .into_iter()
+        .enumerate()
+        .map(|(seq, t)| {
+            let path = set.join(&t.frame);
+            let image = read_gray8(&path).expect("reference frame");
+            measurer.forget_track();
+            let m = measurer.measure(&Frame {
+                seq: seq as u64,
+                capture_time_ns: 0,
+                image,
+                origin: FrameOrigin::File(path),
+            });
+            let detected = m.detection.is_some();
+            let e = errors(&m, &t);
+            (t, e, detected)
+        })
+        .collect()
+}
+
+#[test]
+fn reference_paper10_and_occlusion_meet_targets() {
+    let Some(dir) = reference_dir() else { return };
+    let config = Config::embedded();
+    let mut all = Vec::new();
+    for set in ["paper10", "occlusion"] {
+        let results = measure_set(&dir.join(set), &config);
+        let missed: Vec<&str> = results
+            .iter()
+            .filter(|(t, _, d)| t.expect == "detect" && !d)
+            .map(|(t, _, _)| t.frame.as_str())
+            .collect();
+        let errs: Vec<FrameErrors> = results.iter().filter_map(|(_, e, _)| *e).collect();
+        eprintln!("{}", report(set, &errs));
+        assert!(missed.is_empty(), "{set}: no detection on {missed:?}");
+        all.extend(errs);
+    }
+    let (c50, c95) = med_p95(&all, |e| Some(e.centre_px));
+    let (a50, a95) = med_p95(&all, |e| Some(e.axes_px));
+    let (t50, _) = med_p95(&all, |e| e.theta_deg);
+    let (p50, p95) = med_p95(&all, |e| Some(e.position_rel));
+    eprintln!("{}", report("paper10+occlusion", &all));
+    assert!(
+        c50 <= 0.1 && c95 <= 0.5,
+        "centre error med {c50} p95 {c95} px"
+    );
+    assert!(
+        a50 <= 0.1 && a95 <= 0.5,
+        "semi-axis error med {a50} p95 {a95} px"
+    );
+    assert!(t50 <= 0.2, "theta error med {t50} deg");
+    assert!(
+        p50 <= 0.003 && p95 <= 0.01,
+        "position error med {p50} p95 {p95} of range"
+    );
+}
+
+#[test]
+fn reference_normal_with_outer_rim_visible() {
+    let Some(dir) = reference_dir() else { return };
+    // paper10: the whole canopy is in view on every frame.
+    let results = measure_set(&dir.join("paper10"), &Config::embedded());
+    let errs: Vec<FrameErrors> = results.iter().filter_map(|(_, e, _)| *e).collect();
+    let (n50, n95) = med_p95(&errs, |e| Some(e.normal_deg));
+    eprintln!("paper10 normal (answer given): median {n50:.3} deg, p95 {n95:.3} deg");
+    assert!(n50 <= 0.5, "normal error median {n50} deg");
+}
+
+#[test]
+fn reference_negative_gives_no_detection() {
+    let Some(dir) = reference_dir() else { return };
+    let results = measure_set(&dir.join("negative"), &Config::embedded());
+    let false_hits: Vec<&str> = results
+        .iter()
+        .filter(|(_, _, d)| *d)
+        .map(|(t, _, _)| t.frame.as_str())
+        .collect();
+    assert!(
+        false_hits.is_empty(),
+        "detections on negative frames {false_hits:?}"
+    );
+}
+
+#[test]
+fn reference_badinput_handled_as_expected() {
+    let Some(dir) = reference_dir() else { return };
+    let set = dir.join("badinput");
+    let out = tempfile::tempdir().expect("tmp");
+    let jsonl = out.path().join("out.jsonl");
+    let status = std::process::Command::new(env!("CARGO_BIN_EXE_drogue-vision"))
+        .args(["process", "--independent", "--camera"])
+        .arg(set.join("camera.yaml"))
+        .arg("--out")
+        .arg(&jsonl)
+        .arg(&set)
+        .status()
+        .expect("run process");
+    assert!(status.success(), "process exit {status:?}");
+    let records: Vec<serde_json::Value> = std::fs::read_to_string(&jsonl)
+        .expect("output")
+        .lines()
+        .map(|l| serde_json::from_str(l).expect("json line"))
+        .collect();
+    for t in truths(&set) {
+        let rec = records.iter().find(|r| r["frame"] == t.frame.as_str());
+        let detected = rec.is_some_and(|r| r["detected"] == true);
+        let error = rec.is_some_and(|r| r.get("error").is_some());
+        match t.expect.as_str() {
+            "detect" => assert!(detected, "{}: expected a detection, got {rec:?}", t.frame),
+            "error" => assert!(
+                error && !detected,
+                "{}: expected an error record, got {rec:?}",
+                t.frame
+            ),
+            "no_detect_or_error" => assert!(!detected, "{}: expected no detection", t.frame),
+            "ignore_or_error" => assert!(rec.is_none() || error, "{}: {rec:?}", t.frame),
+            other => panic!("unknown expect {other}"),
+        }
+    }
+}

@@ -1,0 +1,93 @@
+//! The loop closes: frames rendered by the simulator, measured by the
+//! pipeline, compared with the simulator's exact truth.
+
+mod common;
+
+use common::{FrameErrors, Truth, errors, med_p95, report};
+use drogue_sim::{Scenario, Simulator};
+use drogue_vision::config::Config;
+use drogue_vision::frame::{Frame, FrameOrigin};
+use drogue_vision::measure::Measurer;
+use drogue_vision::source::sim::{camera_model, mount_config};
+
+/// Outcome of measuring a stretch of a scenario.
+struct Run {
+    /// Frames whose truth says the drogue is detectable (rim <= 40 % hidden).
+    detectable: usize,
+    detected_of_detectable: usize,
+    /// Detections on frames whose truth says there is nothing to detect.
+    false_detections: usize,
+    errs: Vec<FrameErrors>,
+}
+
+/// Measures frames `skip..skip+count` of a built-in scenario, in sequence.
+fn run_scenario(name: &str, skip: usize, count: usize, config_toml: &str) -> Run {
+    let scenario = Scenario::builtin(name).expect("scenario");
+    let mut sim = Simulator::new(scenario).expect("simulator");
+    let mut config = Config::from_toml_str(config_toml, "test").expect("config");
+    config.mount = mount_config(sim.mount());
+    config.drogue.inner_radius_m = sim.inner_radius_m();
+    config.drogue.canopy_radius_m = sim.canopy_radius_m();
+    let mut measurer =
+        Measurer::new(camera_model(&sim).expect("camera"), &config).expect("measurer");
+    let mut run = Run {
+        detectable: 0,
+        detected_of_detectable: 0,
+        false_detections: 0,
+        errs: Vec::new(),
+    };
+    for (image, truth) in sim.by_ref().skip(skip).take(count) {
+        let t: Truth =
+            serde_json::from_value(serde_json::to_value(&truth).expect("json")).expect("truth");
+        let frame = Frame {
+            seq: truth.seq,
+            capture_time_ns: (truth.t * 1e9) as u64,
+            image,
+            origin: FrameOrigin::Sim(Box::new(truth.clone())),
+        };
+        let m = measurer.measure(&frame);
+        let detectable = truth.expect == "detect" && truth.probe_rim_frac <= 0.4;
+        if detectable {
+            run.detectable += 1;
+            run.detected_of_detectable += usize::from(m.detection.is_some());
+        }
+        if truth.expect != "detect" && m.detection.is_some() {
+            run.false_detections += 1;
+        }
+        if detectable {
+            // Body frame truth closes the loop through the mount as well.
+            if let (Some(d), Some(e)) = (m.detection.as_ref(), errors(&m, &t)) {
+                let body_err = (d.position_body_m - common::v3(truth.position_body)).norm();
+                assert!(
+                    body_err <= (e.position_rel * e.range_m) + 1e-6,
+                    "body and camera position errors disagree: {body_err} m"
+                );
+                run.errs.push(e);
+            }
+        }
+    }
+    run
+}
+
+#[test]
+fn approach_meets_accuracy_targets() {
+    let run = run_scenario("approach", 0, 150, "");
+    eprintln!("{}", report("approach 0-150", &run.errs));
+    assert!(
+        run.detectable > 100,
+        "too few detectable frames: {}",
+        run.detectable
+    );
+    let rate = run.detected_of_detectable as f64 / run.detectable as f64;
+    assert!(rate >= 0.99, "detection rate {rate}");
+    assert_eq!(run.false_detections, 0);
+    let (c50, c95) = med_p95(&run.errs, |e| Some(e.centre_px));
+    let (a50, a95) = med_p95(&run.errs, |e| Some(e.axes_px));
+    let (p50, p95) = med_p95(&run.errs, |e| Some(e.position_rel));
+    assert!(c50 <= 0.1 && c95 <= 0.5, "centre med {c50} p95 {c95} px");
+    assert!(a50 <= 0.1 && a95 <= 0.5, "axes med {a50} p95 {a95} px");
+    assert!(
+        p50 <= 0.003 && p95 <= 0.01,
+        "position med {p50} p95 {p95} of range"
+    );
+}
