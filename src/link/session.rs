@@ -89,18 +89,14 @@ pub(crate) async fn pose_task(
     out: mpsc::Sender<Outgoing>,
     mut shutdown: watch::Receiver<bool>,
 ) {
-    let rate = ctx.settings.cfg.max_rate_hz;
-    let min_interval = (rate > 0.0).then(|| Duration::from_secs_f64(1.0 / rate));
-    let mut next_allowed: Option<tokio::time::Instant> = None;
+    let mut limit = RateLimit::new(ctx.settings.cfg.max_rate_hz);
     let mut built = Vec::with_capacity(4);
     loop {
         tokio::select! {
             changed = latest.changed() => if changed.is_err() { return },
             _ = shutdown.changed() => return,
         }
-        if let Some(at) = next_allowed
-            && tokio::time::Instant::now() < at
-        {
+        if let Some(at) = limit.wait_until(tokio::time::Instant::now()) {
             tokio::select! {
                 _ = sleep_until(at) => {}
                 _ = shutdown.changed() => return,
@@ -131,7 +127,54 @@ pub(crate) async fn pose_task(
                 bump(&ctx.counters.dropped_outgoing, 1);
             }
         }
-        next_allowed = min_interval.map(|d| tokio::time::Instant::now() + d);
+        limit.spend(tokio::time::Instant::now());
+    }
+}
+
+/// A token bucket: on average at most `rate` pose sets a second, with a
+/// burst of [`RateLimit::BURST`], so that a camera running at the limit rate
+/// with some jitter is never held back or thinned out (a plain minimum
+/// interval drops frames that arrive a little early, and drifts).
+struct RateLimit {
+    rate_hz: f64,
+    tokens: f64,
+    last: Option<tokio::time::Instant>,
+}
+
+impl RateLimit {
+    const BURST: f64 = 2.0;
+
+    fn new(rate_hz: f64) -> Self {
+        Self {
+            rate_hz,
+            tokens: Self::BURST,
+            last: None,
+        }
+    }
+
+    fn refill(&mut self, now: tokio::time::Instant) {
+        if let Some(last) = self.last {
+            let earned = now.saturating_duration_since(last).as_secs_f64() * self.rate_hz;
+            self.tokens = (self.tokens + earned).min(Self::BURST);
+        }
+        self.last = Some(now);
+    }
+
+    /// When the next send may go, if not now; `None` without a limit.
+    fn wait_until(&mut self, now: tokio::time::Instant) -> Option<tokio::time::Instant> {
+        if self.rate_hz <= 0.0 {
+            return None;
+        }
+        self.refill(now);
+        (self.tokens < 1.0)
+            .then(|| now + Duration::from_secs_f64((1.0 - self.tokens) / self.rate_hz))
+    }
+
+    fn spend(&mut self, now: tokio::time::Instant) {
+        if self.rate_hz > 0.0 {
+            self.refill(now);
+            self.tokens = (self.tokens - 1.0).max(0.0);
+        }
     }
 }
 

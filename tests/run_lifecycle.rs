@@ -1,0 +1,130 @@
+//! `run` ends cleanly on SIGINT and survives SIGKILL with a readable log.
+//! The logs are read with the `mcap` crate's own readers, not ours.
+
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+const BIN: &str = env!("CARGO_BIN_EXE_drogue-vision");
+
+/// Starts `run` on the simulated approach (paced at 30 fps) into `log_dir`.
+fn start_run(log_dir: &Path, port: u16) -> Child {
+    Command::new(BIN)
+        .args(["run", "--source", "sim:approach", "--mavlink"])
+        .arg(format!("udpout:127.0.0.1:{port}"))
+        .arg("--log-dir")
+        .arg(log_dir)
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .expect("start run")
+}
+
+fn signal(child: &Child, sig: &str) {
+    let status = Command::new("kill")
+        .args([sig, &child.id().to_string()])
+        .status()
+        .expect("kill");
+    assert!(status.success());
+}
+
+fn only_log(dir: &Path) -> PathBuf {
+    let logs: Vec<PathBuf> = std::fs::read_dir(dir)
+        .expect("log dir")
+        .map(|e| e.expect("entry").path())
+        .filter(|p| p.extension().is_some_and(|e| e == "mcap"))
+        .collect();
+    assert_eq!(logs.len(), 1, "{logs:?}");
+    logs[0].clone()
+}
+
+/// `/camera/image` messages readable by streaming, and whether the stream
+/// reached the file's end without an error.
+fn stream_frames(bytes: &[u8]) -> (usize, bool) {
+    let mut frames = 0;
+    let stream = match mcap::MessageStream::new(bytes) {
+        Ok(s) => s,
+        Err(_) => return (0, false),
+    };
+    for m in stream {
+        match m {
+            Ok(m) if m.channel.topic == "/camera/image" => frames += 1,
+            Ok(_) => {}
+            Err(_) => return (frames, false),
+        }
+    }
+    (frames, true)
+}
+
+/// Waits until the process has run for `secs` seconds of frames.
+fn let_it_fly(secs: f64) -> Instant {
+    let start = Instant::now();
+    std::thread::sleep(Duration::from_secs_f64(secs));
+    start
+}
+
+#[test]
+fn sigint_finishes_a_complete_indexed_log() {
+    let dir = tempfile::tempdir().expect("tmp");
+    let mut child = start_run(dir.path(), 14591);
+    let_it_fly(3.0);
+    signal(&child, "-INT");
+    let status = child.wait().expect("wait");
+    assert!(status.success(), "run ended with {status:?} on SIGINT");
+    let bytes = std::fs::read(only_log(dir.path())).expect("log");
+    let summary = mcap::Summary::read(&bytes)
+        .expect("summary readable")
+        .expect("an indexed log has a summary");
+    assert!(!summary.chunk_indexes.is_empty(), "no chunk index");
+    let (frames, complete) = stream_frames(&bytes);
+    assert!(complete, "the log does not read to its end");
+    // About 3 s at 30 fps went by before the signal.
+    assert!(frames >= 45, "only {frames} frames logged");
+}
+
+#[test]
+fn sigkill_leaves_a_log_readable_to_its_last_second() {
+    let dir = tempfile::tempdir().expect("tmp");
+    let mut child = start_run(dir.path(), 14592);
+    // Wait until the log shows frames, then a little more, then kill.
+    let log = loop {
+        if let Ok(Some(p)) = std::fs::read_dir(dir.path()).map(|mut d| {
+            d.find_map(|e| {
+                e.ok()
+                    .map(|e| e.path())
+                    .filter(|p| p.extension().is_some_and(|x| x == "mcap"))
+            })
+        }) {
+            break p;
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    };
+    std::thread::sleep(Duration::from_secs(4));
+    signal(&child, "-KILL");
+    let _ = child.wait();
+    let bytes = std::fs::read(&log).expect("log");
+    let (frames, _) = stream_frames(&bytes);
+    // Four seconds at 30 fps; at most about the last second may be lost
+    // (sync every 0.5 s by default), plus start-up.
+    assert!(frames >= 80, "only {frames} frames readable after SIGKILL");
+
+    // `recover` makes it a complete, indexed file with those frames.
+    let fixed = dir.path().join("fixed.mcap");
+    let status = Command::new(BIN)
+        .args(["recover"])
+        .arg(&log)
+        .arg("--out")
+        .arg(&fixed)
+        .status()
+        .expect("recover");
+    assert!(status.success());
+    let fixed_bytes = std::fs::read(&fixed).expect("fixed");
+    assert!(
+        mcap::Summary::read(&fixed_bytes)
+            .expect("summary")
+            .is_some()
+    );
+    let (recovered_frames, complete) = stream_frames(&fixed_bytes);
+    assert!(complete);
+    assert_eq!(recovered_frames, frames);
+}
