@@ -73,6 +73,8 @@ pub struct RunSummary {
     pub skipped: u64,
     /// Frames the source could not deliver (reported and skipped).
     pub unreadable: u64,
+    /// Times a paced source fell behind its frame rate and was re-anchored.
+    pub source_late: u64,
     pub log_files: Vec<PathBuf>,
     /// Log items lost (queue full or write errors).
     pub log_dropped: u64,
@@ -244,13 +246,17 @@ pub fn run(
     // Sources with a timeline (sim, log) are replayed at its pace unless
     // --fast, on the wall clock: a frame's capture time becomes the run's
     // start plus its time on the source's timeline (exact, so truth and
-    // messages line up; any lateness of the source counts as latency).
+    // messages line up). A source that falls more than MAX_SOURCE_LAG behind
+    // (a simulator on a busy machine) is re-anchored, like a camera dropping
+    // frames; otherwise its frames would all arrive stale.
+    const MAX_SOURCE_LAG: Duration = Duration::from_millis(100);
     let paced = source.recorded_timeline() && !args.fast;
     let started = Instant::now();
     let started_ns = unix_now_ns();
+    let mut lag = Duration::ZERO;
     let mut first_capture_ns: Option<u64> = None;
     let max_frames = args.max_frames.unwrap_or(u64::MAX);
-    let (mut frames, mut skipped, mut unreadable) = (0u64, 0u64, 0u64);
+    let (mut frames, mut skipped, mut unreadable, mut late) = (0u64, 0u64, 0u64, 0u64);
     while frames < max_frames && !stop.load(Ordering::SeqCst) {
         let Some(item) = source.next_frame() else {
             break;
@@ -267,10 +273,19 @@ pub fn run(
         if paced {
             let first = *first_capture_ns.get_or_insert(frame.capture_time_ns);
             let offset = Duration::from_nanos(frame.capture_time_ns.saturating_sub(first));
-            if let Some(wait) = (started + offset).checked_duration_since(Instant::now()) {
+            let now = Instant::now();
+            let due = started + offset + lag;
+            if now > due + MAX_SOURCE_LAG {
+                lag += now - due;
+                late += 1;
+                tracing::warn!(
+                    seq = frame.seq,
+                    "source behind its frame rate: timeline moved on"
+                );
+            } else if let Some(wait) = due.checked_duration_since(now) {
                 std::thread::sleep(wait);
             }
-            frame.capture_time_ns = started_ns + offset.as_nanos() as u64;
+            frame.capture_time_ns = started_ns + (offset + lag).as_nanos() as u64;
         }
         let frame = Arc::new(frame);
         log.frame(Arc::clone(&frame));
@@ -306,6 +321,7 @@ pub fn run(
     summary.frames = frames;
     summary.skipped = skipped;
     summary.unreadable = unreadable;
+    summary.source_late = late;
     summary.interrupted = stop.load(Ordering::SeqCst);
     summary.log_files = log_summary.files;
     summary.link = Some(link_stats);
@@ -329,9 +345,19 @@ impl RunSummary {
             .iter()
             .map(|p| p.display().to_string())
             .collect();
+        let link_line = self.link.as_ref().map_or_else(String::new, |l| {
+            let sent: Vec<String> = l.sent.iter().map(|(k, v)| format!("{v} {k}")).collect();
+            format!(
+                "\nlink: sent {}; {} stale poses not sent; {} autopilot heartbeat losses, {} reconnects",
+                sent.join(", "),
+                l.stale,
+                l.heartbeat_losses,
+                l.reconnects
+            )
+        });
         format!(
             "run {}: {} frames, {} measured, {} detected ({rate:.1} %), {} skipped (measurement busy), \
-             {} unreadable\nlog: {}",
+             {} unreadable, source late {} times{}\nlog: {}",
             if self.interrupted {
                 "interrupted"
             } else {
@@ -342,6 +368,8 @@ impl RunSummary {
             self.detected,
             self.skipped,
             self.unreadable,
+            self.source_late,
+            link_line,
             files.join(", ")
         )
     }
