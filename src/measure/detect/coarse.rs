@@ -74,6 +74,8 @@ pub struct Blob {
     pub theta: f64,
     /// Number of decimated pixels.
     pub area: usize,
+    /// One of its pixels (decimated index).
+    start: usize,
     /// The region's deepest point (farthest from its border), full-res
     /// pixels, and that distance (the inscribed radius), full-res pixels.
     /// Unlike the centroid, it stays on the disc when a long hose or probe
@@ -88,6 +90,15 @@ pub struct Blob {
     pub ringed_px: [f64; 2],
     pub ringed_radius_px: f64,
     pub ringed_light: f64,
+    /// The dark region at the highest threshold that holds this one (the
+    /// regions of a lower threshold are parts of those of a higher one):
+    /// blobs with the same `region` are one dark area of the frame, seen at
+    /// several thresholds or broken into parts.
+    pub region: u32,
+    /// Number of decimated pixels of that highest-threshold region.
+    pub region_area: usize,
+    /// Index of the threshold (in the configured list) the blob was found at.
+    pub level: usize,
 }
 
 /// The level below which `fraction` of the pixels lie.
@@ -117,6 +128,9 @@ pub struct BlobFinder {
     label_out: Vec<Option<usize>>,
     deepest: Vec<(u32, usize)>,
     ringed: Vec<(f64, u32, usize)>,
+    /// Labels of the highest threshold, and the size of each of its regions.
+    region_labels: Vec<u32>,
+    region_areas: Vec<usize>,
 }
 
 /// Directions of the ring test around ridge points.
@@ -144,9 +158,26 @@ impl BlobFinder {
         if hi - lo < min_contrast {
             return;
         }
-        for &fraction in fractions {
-            let threshold = lo + fraction * (hi - lo);
+        // Highest threshold first: its regions hold those of the lower ones.
+        let mut order: Vec<usize> = (0..fractions.len()).collect();
+        order.sort_by(|&i, &j| fractions[j].total_cmp(&fractions[i]));
+        for (pass, &level) in order.iter().enumerate() {
+            let threshold = lo + fractions[level] * (hi - lo);
+            let first = out.len();
             self.label(img, threshold, min_area, out);
+            if pass == 0 {
+                self.region_labels.clone_from(&self.labels);
+                self.region_areas.clear();
+                self.region_areas.resize(self.label_out.len(), 0);
+            }
+            for b in &mut out[first..] {
+                b.level = level;
+                b.region = self.region_labels[b.start];
+                if pass == 0 {
+                    self.region_areas[b.region as usize] = b.area;
+                }
+                b.region_area = self.region_areas[b.region as usize];
+            }
         }
     }
 
@@ -233,6 +264,10 @@ impl BlobFinder {
                 b_px: b * f,
                 theta,
                 area: n,
+                start,
+                region: 0,
+                region_area: 0,
+                level: 0,
                 core_px: [0.0; 2],
                 core_radius_px: 0.0,
                 ringed_px: [0.0; 2],

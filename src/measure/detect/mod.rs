@@ -35,7 +35,8 @@ pub struct DetectConfig {
     /// Dark-region thresholds, as fractions of the way from the frame's
     /// darkest level to its median level.
     pub threshold_fractions: Vec<f64>,
-    /// Most coarse candidates verified at full resolution per frame.
+    /// Most distinct dark regions (at the highest threshold; their parts at
+    /// lower thresholds count with them) verified at full resolution per frame.
     pub max_candidates: u32,
     /// Range limits of the drogue, metres: they bound the disc's size in pixels.
     pub min_range_m: f64,
@@ -186,12 +187,38 @@ impl Detector {
             &mut blobs,
         );
         blobs.retain(|b| b.a_px >= 0.5 * self.min_radius_px && b.b_px >= 0.5);
-        // Larger dark regions first: small ones are mostly noise and thin
-        // shapes, and the budget of candidates is limited.
-        blobs.sort_by_key(|b| std::cmp::Reverse(b.area));
-        // Drop near-duplicates (the same region at several thresholds).
+        // The budget of candidates counts distinct dark regions (at the
+        // highest threshold; the lower thresholds' regions are their parts),
+        // larger first: small ones are mostly noise and thin shapes. A large
+        // region broken into many parts (a shaded probe) must not use up the
+        // budget before a small disc elsewhere in the frame is tried.
+        // Within a region, its largest part at each threshold is tried.
+        blobs.sort_by(|x, y| {
+            y.region_area
+                .cmp(&x.region_area)
+                .then(x.region.cmp(&y.region))
+                .then(y.area.cmp(&x.area))
+        });
         let mut kept: Vec<Blob> = Vec::new();
-        for b in blobs.drain(..) {
+        let mut regions = 0usize;
+        for (i, b) in blobs.iter().enumerate() {
+            let new_region = i == 0 || blobs[i - 1].region != b.region;
+            if new_region {
+                if regions >= self.cfg.max_candidates as usize {
+                    break;
+                }
+                regions += 1;
+            }
+            let same_region = |k: &Blob| k.region == b.region;
+            if kept
+                .iter()
+                .rev()
+                .take_while(|k| same_region(k))
+                .any(|k| k.level == b.level)
+            {
+                continue;
+            }
+            // Drop near-duplicates (the same region at several thresholds).
             let dup = kept.iter().any(|k| {
                 let near = |p: [f64; 2], q: [f64; 2], r: f64| (p[0] - q[0]).hypot(p[1] - q[1]) < r;
                 let r = 0.25 * k.b_px.min(b.b_px);
@@ -201,10 +228,7 @@ impl Detector {
                     && (k.a_px / b.a_px - 1.0).abs() < 0.25
             });
             if !dup {
-                kept.push(b);
-            }
-            if kept.len() >= self.cfg.max_candidates as usize {
-                break;
+                kept.push(b.clone());
             }
         }
         let mut best: Option<Verified> = None;
@@ -258,7 +282,7 @@ impl Detector {
                 break;
             }
         }
-        self.blobs = kept;
+        self.blobs = blobs;
         let scouted = best?;
         let spacing = self.cfg.rim_point_spacing_px;
         Some(

@@ -48,6 +48,10 @@ struct Scene {
     /// Occluding bar (probe): from `bar_from` toward +v (down), half-width.
     bar: Option<([f64; 2], f64, f64)>,
     rects: Vec<[f64; 4]>,
+    /// Dark rectangles [u0, v0, u1, v1] with their own gray level.
+    patches: Vec<([f64; 4], f64)>,
+    /// Hose: from `from` toward -v (up), length, half-width, level; in front.
+    hose: Option<([f64; 2], f64, f64, f64)>,
 }
 
 impl Scene {
@@ -60,10 +64,24 @@ impl Scene {
             with_canopy: true,
             bar: None,
             rects: Vec::new(),
+            patches: Vec::new(),
+            hose: None,
         }
     }
 
     fn level(&self, u: f64, v: f64) -> f64 {
+        if let Some((from, length, half_width, level)) = self.hose
+            && v <= from[1]
+            && v >= from[1] - length
+            && (u - from[0]).abs() <= half_width
+        {
+            return level;
+        }
+        for (r, level) in &self.patches {
+            if u >= r[0] && u <= r[2] && v >= r[1] && v <= r[3] {
+                return *level;
+            }
+        }
         if let Some((from, half_width, level)) = self.bar
             && v >= from[1]
             && (u - from[0]).abs() <= half_width
@@ -221,4 +239,38 @@ fn hostile_frames_do_not_panic() {
         );
         let _ = det.detect(img, Some(&weird));
     }
+}
+
+#[test]
+fn small_disc_with_a_hose_beside_a_large_dark_area_in_many_parts() {
+    // A far drogue (13 px disc, hose attached above) and, elsewhere, a large
+    // dark area made of darker and lighter stripes (a shaded probe): at the
+    // lowest threshold it breaks into several parts, each larger than the
+    // disc. Those parts are one dark area and must not use up the budget of
+    // candidates before the disc is tried.
+    let (w, h) = (640, 480);
+    let cam = camera(w, h);
+    let truth = Ellipse::new(200.4, 300.7, 13.2, 13.0, 0.3);
+    let mut scene = Scene::new(truth);
+    scene.hose = Some(([200.4, 300.7], 60.0, 3.5, 35.0));
+    scene.patches = (0..10)
+        .map(|k| {
+            let u0 = 330.0 + 28.0 * k as f64;
+            let level = if k % 2 == 0 { 25.0 } else { 55.0 };
+            ([u0, 180.0, u0 + 28.0, 250.0], level)
+        })
+        .collect();
+    let img = scene.render(w, h, 2.0, 7);
+    let c = detector(&cam).detect(&img, None).expect("detected");
+    let on_rim: Vec<[f64; 2]> = {
+        let conic = truth.to_conic();
+        c.rim_points_px
+            .iter()
+            .copied()
+            .filter(|p| conic.sampson_distance(p[0], p[1]) < 0.5)
+            .collect()
+    };
+    assert!(on_rim.len() as f64 >= 0.6 * c.rim_points_px.len() as f64);
+    let e = conic_fit::fit_ellipse(&on_rim).unwrap();
+    assert!(truth.max_param_error_px(&e) < 0.15, "{e:?}");
 }
