@@ -91,3 +91,50 @@ fn approach_meets_accuracy_targets() {
         "position med {p50} p95 {p95} of range"
     );
 }
+
+#[test]
+fn contact_meets_targets_with_the_probe_over_the_rim() {
+    // The whole contact scenario: 3 m to contact, the probe hiding part of the
+    // rim in the last metre.
+    let run = run_scenario("contact", 0, 240, "");
+    eprintln!("{}", report("contact 0-240", &run.errs));
+    let rate = run.detected_of_detectable as f64 / run.detectable as f64;
+    assert!(rate >= 0.99, "detection rate {rate}");
+    let (c50, c95) = med_p95(&run.errs, |e| Some(e.centre_px));
+    let (p50, p95) = med_p95(&run.errs, |e| Some(e.position_rel));
+    assert!(c50 <= 0.1 && c95 <= 0.5, "centre med {c50} p95 {c95} px");
+    assert!(p50 <= 0.003 && p95 <= 0.01, "position med {p50} p95 {p95} of range");
+}
+
+#[test]
+fn default_fit_is_at_least_as_accurate_as_algorithm1_on_occluded_rims() {
+    // Frames where the probe hides part of the rim: the last metre of contact.
+    let only_occluded = |name: &str, toml: &str| {
+        let scenario = Scenario::builtin(name).expect("scenario");
+        let sim = Simulator::new(scenario).expect("sim");
+        let picks: Vec<usize> = sim
+            .map(|(_, t)| t)
+            .enumerate()
+            .filter(|(_, t)| t.probe_rim_frac > 0.05 && t.probe_rim_frac <= 0.4 && t.expect == "detect")
+            .map(|(i, _)| i)
+            .collect();
+        assert!(picks.len() >= 10, "only {} occluded frames", picks.len());
+        let first = picks[0];
+        let run = run_scenario(name, first, picks[picks.len() - 1] + 1 - first, toml);
+        (run, picks.len())
+    };
+    let (ours, n) = only_occluded("contact", "");
+    let (paper, _) = only_occluded("contact", "[fit]\nmethod = \"algorithm1\"\n");
+    eprintln!("{}", report(&format!("occluded ({n}) adaptive"), &ours.errs));
+    eprintln!("{}", report(&format!("occluded ({n}) algorithm1"), &paper.errs));
+    for (what, f) in [
+        ("centre", (|e: &FrameErrors| Some(e.centre_px)) as fn(&FrameErrors) -> Option<f64>),
+        ("axes", |e: &FrameErrors| Some(e.axes_px)),
+        ("position", |e: &FrameErrors| Some(e.position_rel)),
+    ] {
+        let (o50, o95) = med_p95(&ours.errs, f);
+        let (a50, a95) = med_p95(&paper.errs, f);
+        assert!(o50 <= a50 && o95 <= a95, "{what}: adaptive {o50}/{o95} vs algorithm1 {a50}/{a95}");
+    }
+    assert!(ours.detected_of_detectable >= paper.detected_of_detectable);
+}
