@@ -222,7 +222,7 @@ fn udp_rate_limit_latest_wins_staleness_and_no_detection() {
     let link = Link::start(&cfg, Some(&peer.address()), rt.handle()).unwrap();
     peer.wait_for_link();
 
-    // 60 measurements at 100 Hz: at most one pose per 100 ms goes out.
+    // 60 measurements at 100 Hz: on average at most one pose per 100 ms goes out.
     let mut captures = Vec::new();
     let start = Instant::now();
     for i in 0..60u64 {
@@ -235,7 +235,9 @@ fn udp_rate_limit_latest_wins_staleness_and_no_detection() {
     let elapsed = start.elapsed().as_secs_f64();
     let got = peer.collect_until(Duration::from_millis(300), |_| false);
     let lts = landing_targets(&got);
-    let max_expected = (elapsed * 10.0).ceil() as usize + 1;
+    // A token bucket (burst 2) sends at most 2 + rate * T in any window T;
+    // the window runs until the last pending pose may go, 100 ms after.
+    let max_expected = ((elapsed + 0.1) * 10.0).ceil() as usize + 2;
     assert!(
         lts.len() >= 4 && lts.len() <= max_expected,
         "{} poses in {elapsed:.2} s",
