@@ -185,7 +185,10 @@ impl BlobFinder {
         let (w, h) = (img.width, img.height);
         self.labels.clear();
         self.labels.resize(w * h, 0);
-        let dark = |i: usize| f64::from(img.pixels[i]) <= threshold;
+        // Integer levels: p <= threshold exactly when p <= floor(threshold).
+        let level = threshold.floor().clamp(-1.0, 255.0) as i32;
+        let pixels = &img.pixels;
+        let dark = |i: usize| i32::from(pixels[i]) <= level;
         let first_out = out.len();
         // Union of the kept regions' boxes: the distance transform runs there only.
         let mut region = [usize::MAX, usize::MAX, 0usize, 0usize];
@@ -218,13 +221,11 @@ impl BlobFinder {
                     bbox[2].max(xi),
                     bbox[3].max(yi),
                 ];
-                for dy in -1i64..=1 {
-                    for dx in -1i64..=1 {
-                        let (nx, ny) = (xi as i64 + dx, yi as i64 + dy);
-                        if nx < 0 || ny < 0 || nx >= w as i64 || ny >= h as i64 {
-                            continue;
-                        }
-                        let j = ny as usize * w + nx as usize;
+                // The 8 neighbours inside the image.
+                let (x0, x1) = (xi.saturating_sub(1), (xi + 1).min(w - 1));
+                let (y0, y1) = (yi.saturating_sub(1), (yi + 1).min(h - 1));
+                for ny in y0..y1 + 1 {
+                    for j in ny * w + x0..ny * w + x1 + 1 {
                         if self.labels[j] == 0 && dark(j) {
                             self.labels[j] = next;
                             self.stack.push(j as u32);
@@ -342,11 +343,13 @@ impl BlobFinder {
         }
         self.deepest.clear();
         self.deepest.resize(out.len() - first_out, (0, 0));
-        for i in (ry0..=ry1).flat_map(|y| y * w + rx0..=y * w + rx1) {
-            if let Some(Some(o)) = self.label_out.get(labels[i] as usize) {
-                let slot = &mut self.deepest[o - first_out];
-                if d[i] > slot.0 {
-                    *slot = (d[i], i);
+        for y in ry0..ry1 + 1 {
+            for i in y * w + rx0..y * w + rx1 + 1 {
+                if let Some(Some(o)) = self.label_out.get(labels[i] as usize) {
+                    let slot = &mut self.deepest[o - first_out];
+                    if d[i] > slot.0 {
+                        *slot = (d[i], i);
+                    }
                 }
             }
         }
