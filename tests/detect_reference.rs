@@ -13,25 +13,10 @@ use drogue_vision::image_io::read_gray8;
 use drogue_vision::measure::detect::Detector;
 use drogue_vision::measure::ellipse::{Conic, Ellipse};
 use nalgebra::{Matrix3, Matrix6, Vector6};
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
-fn reference_dir() -> Option<PathBuf> {
-    match std::env::var_os("DROGUE_REFERENCE_DIR") {
-        None => {
-            println!("DROGUE_REFERENCE_DIR is not set: reference-frame detection test SKIPPED");
-            None
-        }
-        Some(d) => {
-            let d = PathBuf::from(d);
-            assert!(
-                d.is_dir(),
-                "DROGUE_REFERENCE_DIR={} is not a folder",
-                d.display()
-            );
-            Some(d)
-        }
-    }
-}
+mod common;
+use common::reference_dir;
 
 /// Weighted algebraic conic fit (weights per point), normalised coordinates.
 fn weighted_conic(points: &[[f64; 2]], weights: &[f64]) -> Option<Conic> {

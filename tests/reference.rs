@@ -6,31 +6,13 @@
 
 mod common;
 
-use common::{FrameErrors, Truth, errors, med_p95, report};
+use common::{FrameErrors, Truth, errors, med_p95, reference_dir, report};
 use drogue_vision::camera::CameraModel;
 use drogue_vision::config::Config;
 use drogue_vision::frame::{Frame, FrameOrigin};
 use drogue_vision::image_io::read_gray8;
 use drogue_vision::measure::Measurer;
-use std::path::{Path, PathBuf};
-
-fn reference_dir() -> Option<PathBuf> {
-    match std::env::var_os("DROGUE_REFERENCE_DIR") {
-        None => {
-            eprintln!("DROGUE_REFERENCE_DIR is not set: reference cross-check skipped");
-            None
-        }
-        Some(d) => {
-            let d = PathBuf::from(d);
-            assert!(
-                d.is_dir(),
-                "DROGUE_REFERENCE_DIR={} is not a folder",
-                d.display()
-            );
-            Some(d)
-        }
-    }
-}
+use std::path::Path;
 
 fn truths(set: &Path) -> Vec<Truth> {
     let text = std::fs::read_to_string(set.join("truth.jsonl")).expect("truth.jsonl");

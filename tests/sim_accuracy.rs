@@ -103,7 +103,10 @@ fn contact_meets_targets_with_the_probe_over_the_rim() {
     let (c50, c95) = med_p95(&run.errs, |e| Some(e.centre_px));
     let (p50, p95) = med_p95(&run.errs, |e| Some(e.position_rel));
     assert!(c50 <= 0.1 && c95 <= 0.5, "centre med {c50} p95 {c95} px");
-    assert!(p50 <= 0.003 && p95 <= 0.01, "position med {p50} p95 {p95} of range");
+    assert!(
+        p50 <= 0.003 && p95 <= 0.01,
+        "position med {p50} p95 {p95} of range"
+    );
 }
 
 #[test]
@@ -115,7 +118,9 @@ fn default_fit_is_at_least_as_accurate_as_algorithm1_on_occluded_rims() {
         let picks: Vec<usize> = sim
             .map(|(_, t)| t)
             .enumerate()
-            .filter(|(_, t)| t.probe_rim_frac > 0.05 && t.probe_rim_frac <= 0.4 && t.expect == "detect")
+            .filter(|(_, t)| {
+                t.probe_rim_frac > 0.05 && t.probe_rim_frac <= 0.4 && t.expect == "detect"
+            })
             .map(|(i, _)| i)
             .collect();
         assert!(picks.len() >= 10, "only {} occluded frames", picks.len());
@@ -125,16 +130,28 @@ fn default_fit_is_at_least_as_accurate_as_algorithm1_on_occluded_rims() {
     };
     let (ours, n) = only_occluded("contact", "");
     let (paper, _) = only_occluded("contact", "[fit]\nmethod = \"algorithm1\"\n");
-    eprintln!("{}", report(&format!("occluded ({n}) adaptive"), &ours.errs));
-    eprintln!("{}", report(&format!("occluded ({n}) algorithm1"), &paper.errs));
+    eprintln!(
+        "{}",
+        report(&format!("occluded ({n}) adaptive"), &ours.errs)
+    );
+    eprintln!(
+        "{}",
+        report(&format!("occluded ({n}) algorithm1"), &paper.errs)
+    );
     for (what, f) in [
-        ("centre", (|e: &FrameErrors| Some(e.centre_px)) as fn(&FrameErrors) -> Option<f64>),
+        (
+            "centre",
+            (|e: &FrameErrors| Some(e.centre_px)) as fn(&FrameErrors) -> Option<f64>,
+        ),
         ("axes", |e: &FrameErrors| Some(e.axes_px)),
         ("position", |e: &FrameErrors| Some(e.position_rel)),
     ] {
         let (o50, o95) = med_p95(&ours.errs, f);
         let (a50, a95) = med_p95(&paper.errs, f);
-        assert!(o50 <= a50 && o95 <= a95, "{what}: adaptive {o50}/{o95} vs algorithm1 {a50}/{a95}");
+        assert!(
+            o50 <= a50 && o95 <= a95,
+            "{what}: adaptive {o50}/{o95} vs algorithm1 {a50}/{a95}"
+        );
     }
     assert!(ours.detected_of_detectable >= paper.detected_of_detectable);
 }

@@ -6,6 +6,28 @@
 use drogue_vision::measure::Measurement;
 use drogue_vision::measure::ellipse::Ellipse;
 use nalgebra::Vector3;
+use std::path::PathBuf;
+
+/// The reference frames' folder from `DROGUE_REFERENCE_DIR`: `None` (and a
+/// plain message) when the variable is not set; a failure when it is set and
+/// the folder is missing.
+pub fn reference_dir() -> Option<PathBuf> {
+    match std::env::var_os("DROGUE_REFERENCE_DIR") {
+        None => {
+            eprintln!("DROGUE_REFERENCE_DIR is not set: reference cross-check SKIPPED");
+            None
+        }
+        Some(d) => {
+            let d = PathBuf::from(d);
+            assert!(
+                d.is_dir(),
+                "DROGUE_REFERENCE_DIR={} is not a folder",
+                d.display()
+            );
+            Some(d)
+        }
+    }
+}
 
 /// Truth of one frame, as the reference `truth.jsonl` and the simulator give it.
 #[derive(Clone, Debug, serde::Deserialize)]
