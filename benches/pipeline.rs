@@ -1,10 +1,13 @@
 //! The whole measurement (detect + fit + pose + mount + track) per frame,
-//! single-threaded, on simulator frames: a full-frame search (no track) and a
-//! tracked frame (searched near the predicted ellipse). Compare with
-//! `benches/opencv_baseline.py` on the same frames (written to
+//! single-threaded, on simulator frames:
+//! - full frame: no track, the whole frame is searched;
+//! - tracked: the tracker has measured the previous frame, so this frame is
+//!   searched near the predicted ellipse first (the live case).
+//!
+//! Compare with `benches/opencv_baseline.py` on the same frames (written to
 //! `target/bench-frames/` by this benchmark).
 
-use criterion::{Criterion, criterion_group, criterion_main};
+use criterion::{BatchSize, Criterion, criterion_group, criterion_main};
 use drogue_sim::{Scenario, Simulator};
 use drogue_vision::config::Config;
 use drogue_vision::frame::{Frame, FrameOrigin};
@@ -12,36 +15,48 @@ use drogue_vision::measure::Measurer;
 use drogue_vision::source::sim::{camera_model, mount_config};
 use std::hint::black_box;
 
-/// Frames of a scenario at the given indices, with a measurer set up for it.
-fn frames(scenario: &str, picks: &[usize]) -> (Measurer, Vec<Frame>) {
+/// Frames `k` and `k + 1` of a scenario for each pick, with a measurer set
+/// up for the scenario's camera and mount.
+fn frame_pairs(scenario: &str, picks: &[usize]) -> (Measurer, Vec<(Frame, Frame)>) {
     let mut sim = Simulator::new(Scenario::builtin(scenario).unwrap()).unwrap();
     let mut config = Config::embedded();
     config.mount = mount_config(sim.mount());
     let measurer = Measurer::new(camera_model(&sim).unwrap(), &config).unwrap();
-    let last = picks.iter().copied().max().unwrap_or(0);
     let out = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("target/bench-frames")
         .join(scenario);
     let _ = std::fs::create_dir_all(&out);
-    let mut picked = Vec::new();
+    let last = picks.iter().copied().max().unwrap_or(0) + 1;
+    let mut frames = Vec::new();
     for (i, (image, truth)) in sim.by_ref().take(last + 1).enumerate() {
-        if picks.contains(&i) {
+        if picks.contains(&i) || picks.contains(&(i.wrapping_sub(1))) {
             let _ = image.save(out.join(&truth.frame));
-            picked.push(Frame {
-                seq: truth.seq,
-                capture_time_ns: truth.capture_time_ns,
-                image,
-                origin: FrameOrigin::Sim(Box::new(truth)),
-            });
+            frames.push((
+                i,
+                Frame {
+                    seq: truth.seq,
+                    capture_time_ns: truth.capture_time_ns,
+                    image,
+                    origin: FrameOrigin::Sim(Box::new(truth)),
+                },
+            ));
         }
     }
-    (measurer, picked)
+    let pairs = picks
+        .iter()
+        .filter_map(|&k| {
+            let a = frames.iter().find(|(i, _)| *i == k)?.1.clone();
+            let b = frames.iter().find(|(i, _)| *i == k + 1)?.1.clone();
+            Some((a, b))
+        })
+        .collect();
+    (measurer, pairs)
 }
 
 fn bench(c: &mut Criterion) {
     for (scenario, picks) in [("approach", vec![60usize, 300, 540]), ("contact", vec![80])] {
-        let (mut measurer, frames) = frames(scenario, &picks);
-        for frame in &frames {
+        let (mut measurer, pairs) = frame_pairs(scenario, &picks);
+        for (previous, frame) in &pairs {
             let name = format!("{scenario}/{}", frame.seq);
             c.bench_function(&format!("measure full frame {name}"), |b| {
                 b.iter(|| {
@@ -49,12 +64,15 @@ fn bench(c: &mut Criterion) {
                     black_box(measurer.measure(black_box(frame)))
                 })
             });
-            // Tracked: the track is settled on this very frame, so each
-            // iteration searches near its prediction first.
             measurer.forget_track();
-            measurer.measure(frame);
+            measurer.measure(previous);
+            let primed = measurer.clone();
             c.bench_function(&format!("measure tracked {name}"), |b| {
-                b.iter(|| black_box(measurer.measure(black_box(frame))))
+                b.iter_batched(
+                    || primed.clone(),
+                    |mut m| black_box(m.measure(black_box(frame))),
+                    BatchSize::SmallInput,
+                )
             });
         }
     }

@@ -110,6 +110,7 @@ pub enum MeasureSetupError {
 
 /// Runs the whole measurement chain over a sequence of frames. Holds the
 /// tracking state and scratch buffers; one per camera.
+#[derive(Clone)]
 pub struct Measurer {
     camera: CameraModel,
     inner_radius_m: f64,

@@ -53,6 +53,7 @@ struct TrackState {
     resolved: bool,
 }
 
+#[derive(Clone)]
 pub struct Tracker {
     max_gap_ns: u64,
     canopy_min_difference: f64,

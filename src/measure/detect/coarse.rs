@@ -7,7 +7,7 @@
 use image::GrayImage;
 
 /// Block-mean decimation of a frame, reusing its buffer.
-#[derive(Default)]
+#[derive(Clone, Default)]
 pub struct Decimated {
     pub width: usize,
     pub height: usize,
@@ -119,7 +119,7 @@ fn percentile(pixels: &[u8], fraction: f64) -> u8 {
 }
 
 /// Scratch for the labelling.
-#[derive(Default)]
+#[derive(Clone, Default)]
 pub struct BlobFinder {
     labels: Vec<u32>,
     stack: Vec<u32>,

@@ -109,6 +109,7 @@ struct Verified {
 }
 
 /// Finds the dark inner circle. Holds scratch buffers between frames.
+#[derive(Clone)]
 pub struct Detector {
     cfg: DetectConfig,
     camera: CameraModel,

@@ -203,6 +203,7 @@ pub enum FitError {
 }
 
 /// Runs the configured fit method; deterministic for a given seed.
+#[derive(Clone)]
 pub struct Fitter {
     cfg: FitConfig,
     config_error: Option<String>,
