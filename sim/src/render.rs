@@ -586,13 +586,16 @@ impl Renderer {
                 let radial_f = (rho - d.inner_radius) / (d.canopy_radius - d.inner_radius);
                 let mut val =
                     d.canopy * (0.82 + 0.18 * clamp01(radial_f)) * (1.0 + 0.06 * x / rho.max(1e-9));
-                let mut strut_cov: f64 = 0.0;
+                // Coverage falls with the distance to a strut, so the nearest
+                // strut (on its own side of the centre) decides: one division
+                // per pixel instead of one per strut.
+                let mut perp_min = f64::INFINITY;
                 for &(c, sn) in &strut_dirs {
                     if x * c + y * sn > 0.0 {
-                        let perp = (-x * sn + y * c).abs();
-                        strut_cov = strut_cov.max(clamp01(0.5 - (perp - half_strut) / s));
+                        perp_min = perp_min.min((-x * sn + y * c).abs());
                     }
                 }
+                let strut_cov = clamp01(0.5 - (perp_min - half_strut) / s);
                 val += (d.strut - val) * strut_cov;
                 let rim_cov = clamp01(0.5 + (rho - (d.canopy_radius - d.rim_width)) / s);
                 val += (d.rim - val) * rim_cov;
