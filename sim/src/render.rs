@@ -96,6 +96,23 @@ impl TubeAxis {
 
     #[inline]
     fn probe_ray(&self, d: &V3) -> Option<(f64, f64, f64)> {
+        let (t, s, dist2) = self.closest(d)?;
+        let dist = dist2.sqrt();
+        let r = self.radius_at(s);
+        Some((t, dist - r, dist / r.max(1e-9)))
+    }
+
+    /// Tube radius at axis position `s` (metres from `a`).
+    #[inline]
+    fn radius_at(&self, s: f64) -> f64 {
+        self.radius_a + self.radius_slope * s
+    }
+
+    /// Closest approach of the ray to the axis: (depth t, axis position s,
+    /// squared distance), without the square root, so per-pixel callers can
+    /// reject pixels clear of the tube cheaply.
+    #[inline]
+    fn closest(&self, d: &V3) -> Option<(f64, f64, f64)> {
         let dd = d.dot(d);
         let du = d.dot(&self.u);
         let da = d.dot(&self.a);
@@ -111,9 +128,7 @@ impl TubeAxis {
         if t <= 0.0 {
             return None;
         }
-        let dist = (d * t - self.a - self.u * s).norm();
-        let r = self.radius_a + self.radius_slope * s;
-        Some((t, dist - r, dist / r.max(1e-9)))
+        Some((t, s, (d * t - self.a - self.u * s).norm_squared()))
     }
 }
 
@@ -188,14 +203,7 @@ pub struct Renderer {
 }
 
 /// One image row of the sky, bilinear from the coarse grid.
-fn sky_row(
-    grid: &[f32],
-    gw: usize,
-    v: usize,
-    ix: &[(usize, f32)],
-    tmp: &mut [f32],
-    out: &mut [f32],
-) {
+fn sky_row(grid: &[f32], gw: usize, v: usize, tmp: &mut [f32], out: &mut [f32]) {
     let (j, fy) = (v / GRID, (v % GRID) as f32 / GRID as f32);
     let (g0, g1) = (
         &grid[j * gw..(j + 1) * gw],
@@ -204,8 +212,41 @@ fn sky_row(
     for ((t, a), b) in tmp.iter_mut().zip(g0).zip(g1) {
         *t = a + (b - a) * fy;
     }
-    for (o, &(i, fx)) in out.iter_mut().zip(ix) {
-        *o = tmp[i] + (tmp[i + 1] - tmp[i]) * fx;
+    lerp_columns(tmp, out);
+}
+
+/// Bilinear along a row: pixel u = i * GRID + k gets
+/// `cells[i] + (cells[i + 1] - cells[i]) * k / GRID`. Done one grid cell at a
+/// time (a fixed 16-wide loop the compiler vectorises) instead of looking up
+/// each pixel's cell.
+#[inline]
+fn lerp_columns(cells: &[f32], out: &mut [f32]) {
+    const FX: [f32; GRID] = {
+        let mut f = [0f32; GRID];
+        let mut k = 0;
+        while k < GRID {
+            f[k] = k as f32 / GRID as f32;
+            k += 1;
+        }
+        f
+    };
+    for (chunk, pair) in out.chunks_mut(GRID).zip(cells.windows(2)) {
+        let (a, b) = (pair[0], pair[1]);
+        for (o, fx) in chunk.iter_mut().zip(&FX) {
+            *o = a + (b - a) * fx;
+        }
+    }
+}
+
+/// Like `lerp_columns`, adding `scale` times the interpolated value.
+#[inline]
+fn add_lerp_columns(cells: &[f32], scale: f32, out: &mut [f32]) {
+    let mut tmp = [0f32; GRID];
+    for (chunk, pair) in out.chunks_mut(GRID).zip(cells.windows(2)) {
+        lerp_columns(pair, &mut tmp[..chunk.len()]);
+        for (o, t) in chunk.iter_mut().zip(&tmp) {
+            *o += t * scale;
+        }
     }
 }
 
@@ -416,9 +457,6 @@ impl Renderer {
             sky_grid[k] = s;
             veil_grid[k] = v;
         }
-        let ix: Vec<(usize, f32)> = (0..w)
-            .map(|u| (u / GRID, (u % GRID) as f32 / GRID as f32))
-            .collect();
         // 2. Rows the objects touch get a full radiance row; the others go
         // straight from the sky to the sensor.
         let hose = scene.hose.and_then(|t| t.clipped(0.05));
@@ -445,7 +483,6 @@ impl Renderer {
                 &sky_grid,
                 self.gw,
                 v,
-                &ix,
                 &mut grid_row,
                 &mut rad[v * w..(v + 1) * w],
             );
@@ -463,7 +500,7 @@ impl Renderer {
             self.draw_tube(&mut rad, &probe, &probe_spans, Some(&scene.drogue));
         }
         // 3. Sensor: vignette, glare veil, gain, noise, 8 bits.
-        let img = self.sensor(&rad, &dirty, &sky_grid, &veil_grid, &ix, scene.noise_seed);
+        let img = self.sensor(&rad, &dirty, &sky_grid, &veil_grid, scene.noise_seed);
         self.rad = rad;
         img
     }
@@ -549,13 +586,16 @@ impl Renderer {
                 let radial_f = (rho - d.inner_radius) / (d.canopy_radius - d.inner_radius);
                 let mut val =
                     d.canopy * (0.82 + 0.18 * clamp01(radial_f)) * (1.0 + 0.06 * x / rho.max(1e-9));
-                let mut strut_cov: f64 = 0.0;
+                // Coverage falls with the distance to a strut, so the nearest
+                // strut (on its own side of the centre) decides: one division
+                // per pixel instead of one per strut.
+                let mut perp_min = f64::INFINITY;
                 for &(c, sn) in &strut_dirs {
                     if x * c + y * sn > 0.0 {
-                        let perp = (-x * sn + y * c).abs();
-                        strut_cov = strut_cov.max(clamp01(0.5 - (perp - half_strut) / s));
+                        perp_min = perp_min.min((-x * sn + y * c).abs());
                     }
                 }
+                let strut_cov = clamp01(0.5 - (perp_min - half_strut) / s);
                 val += (d.strut - val) * strut_cov;
                 let rim_cov = clamp01(0.5 + (rho - (d.canopy_radius - d.rim_width)) / s);
                 val += (d.rim - val) * rim_cov;
@@ -662,9 +702,18 @@ impl Renderer {
         for &(v, u0, u1) in spans {
             for u in u0..=u1 {
                 let ray = self.ray(u, v);
-                let Some((t, sd, k)) = axis.probe_ray(&ray) else {
+                let Some((t, s, dist2)) = axis.closest(&ray) else {
                     continue;
                 };
+                // Coverage needs dist < r + t * px / 2; span pixels clear of
+                // the tube are rejected here without the square root.
+                let r = axis.radius_at(s);
+                let reach = r + 0.5 * t * px;
+                if reach > 0.0 && dist2 > reach * reach * (1.0 + 1e-9) {
+                    continue;
+                }
+                let dist = dist2.sqrt();
+                let (sd, k) = (dist - r, dist / r.max(1e-9));
                 let cov = clamp01(0.5 - sd / (t * px));
                 if cov <= 0.0 {
                     continue;
@@ -739,16 +788,16 @@ impl Renderer {
         dirty: &[bool],
         sky_grid: &[f32],
         veil_grid: &[f32],
-        ix: &[(usize, f32)],
         seed: u64,
     ) -> GrayImage {
         let (w, h) = (self.w, self.h);
         let l = &self.look;
         let gain = (255.0 * l.gain) as f32;
         let noisy = l.read_noise_dn > 0.0 || l.shot_noise_dn > 0.0;
-        let sigma_of: Vec<f32> = (0..256)
-            .map(|dn| ((l.read_noise_dn.powi(2) + l.shot_noise_dn * dn as f64).sqrt()) as f32)
-            .collect();
+        // Noise sigma at the whole-DN level below the signal (computed, not
+        // looked up, so the loop below vectorises).
+        let read_var = l.read_noise_dn.powi(2) as f32;
+        let shot = l.shot_noise_dn as f32;
         let glare = l.glare > 0.0;
         let mut out = vec![0u8; w * h];
         let mut state = seed ^ 0x9e37_79b9_7f4a_7c15;
@@ -766,7 +815,7 @@ impl Renderer {
             if dirty[v] {
                 row.copy_from_slice(&rad[v * w..(v + 1) * w]);
             } else {
-                sky_row(sky_grid, self.gw, v, ix, &mut grid_row, &mut row);
+                sky_row(sky_grid, self.gw, v, &mut grid_row, &mut row);
             }
             // Vignetting: 1 - k r^2 (0.6 + 0.4 r^2), r relative to the corner.
             let dv2 = (v as f32 - self.cam.cy as f32).powi(2);
@@ -781,22 +830,28 @@ impl Renderer {
                     let a = veil_grid[j * self.gw + i];
                     *slot = a + (veil_grid[(j + 1) * self.gw + i] - a) * fy;
                 }
-                for (r, &(i, fx)) in row.iter_mut().zip(ix) {
-                    *r += (veil_row[i] + (veil_row[i + 1] - veil_row[i]) * fx) * gain;
-                }
+                add_lerp_columns(&veil_row, gain, &mut row);
             }
             let dst = &mut out[v * w..(v + 1) * w];
             if noisy {
-                // Gaussian noise: a random run of the precomputed table.
-                let off = next() as usize;
-                for (k, (o, &dn)) in dst.iter_mut().zip(&row).enumerate() {
-                    let g = self.gauss[(off + k) & mask];
-                    let q = dn.clamp(0.0, 255.0);
-                    *o = (q + g * sigma_of[q as usize] + 0.5).clamp(0.0, 255.0) as u8;
+                // Gaussian noise: a random run of the precomputed table,
+                // taken as contiguous pieces up to the table's wrap.
+                let mut start = next() as usize & mask;
+                let (mut dst, mut row) = (&mut dst[..], &row[..]);
+                while !row.is_empty() {
+                    let n = row.len().min(self.gauss.len() - start);
+                    let gauss = &self.gauss[start..start + n];
+                    for ((o, &dn), &g) in dst[..n].iter_mut().zip(&row[..n]).zip(gauss) {
+                        let q = dn.clamp(0.0, 255.0);
+                        let sigma = (read_var + shot * (q as i32 as f32)).sqrt();
+                        *o = (q + g * sigma + 0.5).clamp(0.0, 255.0) as i32 as u8;
+                    }
+                    (dst, row) = (&mut dst[n..], &row[n..]);
+                    start = 0;
                 }
             } else {
                 for (o, &dn) in dst.iter_mut().zip(&row) {
-                    *o = (dn + 0.5).clamp(0.0, 255.0) as u8;
+                    *o = (dn + 0.5).clamp(0.0, 255.0) as i32 as u8;
                 }
             }
         }
