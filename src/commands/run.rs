@@ -185,10 +185,11 @@ pub fn run(
     config: Config,
     log_layer_sink: impl FnOnce(&LogHandle),
 ) -> Result<RunSummary, RunError> {
-    let spec: SourceSpec = args
+    let spec_text = args
         .source
         .clone()
-        .unwrap_or_else(|| config.run.source.clone())
+        .unwrap_or_else(|| config.run.source.clone());
+    let spec: SourceSpec = spec_text
         .parse()
         .map_err(|e: crate::source::SourceError| RunError::Setup(e.to_string()))?;
     let mut source = open_source(&spec)?;
@@ -215,6 +216,12 @@ pub fn run(
     let log = FlightLog::start(&config.log, &log_dir, &camera)
         .map_err(|e| RunError::Setup(e.to_string()))?;
     log_layer_sink(&log);
+    tracing::info!(
+        source = %spec_text,
+        mavlink = %args.mavlink.as_deref().unwrap_or(&config.link.connection),
+        camera = %camera.name,
+        "run started"
+    );
 
     let stop = Arc::new(AtomicBool::new(false));
     watch_signals(&rt, Arc::clone(&stop));
@@ -314,6 +321,14 @@ pub fn run(
     events_done.store(true, Ordering::SeqCst);
     let _ = event_thread.join();
     let link_stats = link.stats();
+    tracing::info!(
+        frames,
+        skipped,
+        unreadable,
+        late,
+        interrupted = stop.load(Ordering::SeqCst),
+        "run finished"
+    );
     let log_summary = log.finish().map_err(|e| RunError::Runtime(e.to_string()))?;
     rt.shutdown_timeout(Duration::from_secs(1));
 
