@@ -70,18 +70,8 @@ pub(crate) fn fit(
     if !(m_star.a > 0.0 && m_star.b > 0.0) {
         return Err(FitError::NoEllipse);
     }
-    // Line 18: P* = points whose deviation from M* is below the threshold.
-    let conic = m_star.to_conic();
+    // Line 18: P* = points whose deviation from M* is below the threshold;
+    // line 19: A+C=1 least squares on P*.
     let limit = cfg.algorithm1_inlier_threshold_px / pts.scale;
-    let inliers: Vec<bool> = pts
-        .xy
-        .iter()
-        .map(|p| conic.sampson_distance(p[0], p[1]) < limit)
-        .collect();
-    // Line 19: A+C=1 least squares on P*.
-    if inliers.iter().filter(|k| **k).count() < 5 {
-        return Err(FitError::NoEllipse);
-    }
-    let e = least_squares::fit_ellipse_selected(&pts.xy, &inliers).ok_or(FitError::NoEllipse)?;
-    Ok((e, inliers))
+    least_squares::refit_inliers(&pts.xy, &m_star, limit)
 }

@@ -74,6 +74,26 @@ pub(crate) fn fit_ellipse_selected(points: &[[f64; 2]], keep: &[bool]) -> Option
     conic_to_ellipse(&fit_conic(selected)?)
 }
 
+/// The baselines' last step (Algorithm 1 lines 18-19, and RANSAC's): the
+/// points within `limit` (Sampson distance) of `model` are the inliers, and
+/// the A+C=1 least squares of them is the result.
+pub(crate) fn refit_inliers(
+    points: &[[f64; 2]],
+    model: &Ellipse,
+    limit: f64,
+) -> Result<(Ellipse, Vec<bool>), super::FitError> {
+    let conic = model.to_conic();
+    let inliers: Vec<bool> = points
+        .iter()
+        .map(|p| conic.sampson_distance(p[0], p[1]) < limit)
+        .collect();
+    if inliers.iter().filter(|k| **k).count() < 5 {
+        return Err(super::FitError::NoEllipse);
+    }
+    let e = fit_ellipse_selected(points, &inliers).ok_or(super::FitError::NoEllipse)?;
+    Ok((e, inliers))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

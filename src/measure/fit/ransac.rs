@@ -40,15 +40,5 @@ pub(crate) fn fit(
         }
     }
     let (_, model) = best.ok_or(FitError::NoEllipse)?;
-    let conic = model.to_conic();
-    let inliers: Vec<bool> = pts
-        .xy
-        .iter()
-        .map(|p| conic.sampson_distance(p[0], p[1]) < limit)
-        .collect();
-    if inliers.iter().filter(|k| **k).count() < 5 {
-        return Err(FitError::NoEllipse);
-    }
-    let e = least_squares::fit_ellipse_selected(&pts.xy, &inliers).ok_or(FitError::NoEllipse)?;
-    Ok((e, inliers))
+    least_squares::refit_inliers(&pts.xy, &model, limit)
 }
