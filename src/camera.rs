@@ -182,38 +182,12 @@ impl CameraModel {
 
     /// ROS camera_info YAML, as the ROS calibration tools write it.
     pub fn to_ros_yaml(&self) -> String {
-        let k = self.k;
         let list = |v: &[f64]| {
             v.iter()
                 .map(|x| format!("{x}"))
                 .collect::<Vec<_>>()
                 .join(", ")
         };
-        let krow = [
-            k[(0, 0)],
-            k[(0, 1)],
-            k[(0, 2)],
-            k[(1, 0)],
-            k[(1, 1)],
-            k[(1, 2)],
-            0.0,
-            0.0,
-            1.0,
-        ];
-        let p = [
-            k[(0, 0)],
-            k[(0, 1)],
-            k[(0, 2)],
-            0.0,
-            0.0,
-            k[(1, 1)],
-            k[(1, 2)],
-            0.0,
-            0.0,
-            0.0,
-            1.0,
-            0.0,
-        ];
         format!(
             "image_width: {}\nimage_height: {}\ncamera_name: {}\ncamera_matrix:\n  rows: 3\n  cols: 3\n  data: [{}]\n\
              distortion_model: plumb_bob\ndistortion_coefficients:\n  rows: 1\n  cols: 5\n  data: [{}]\n\
@@ -222,10 +196,24 @@ impl CameraModel {
             self.width,
             self.height,
             self.name,
-            list(&krow),
+            list(&self.k_row_major()),
             list(&self.distortion),
-            list(&p)
+            list(&self.projection_row_major())
         )
+    }
+
+    /// K, row-major (ROS `camera_matrix`, Foxglove `K`).
+    pub fn k_row_major(&self) -> [f64; 9] {
+        std::array::from_fn(|i| self.k[(i / 3, i % 3)])
+    }
+
+    /// The projection matrix [K | 0], row-major (ROS `projection_matrix`,
+    /// Foxglove `P`): rim points are undistorted, not rectified.
+    pub fn projection_row_major(&self) -> [f64; 12] {
+        std::array::from_fn(|i| {
+            let (row, col) = (i / 4, i % 4);
+            if col < 3 { self.k[(row, col)] } else { 0.0 }
+        })
     }
 
     pub fn fx(&self) -> f64 {

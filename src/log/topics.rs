@@ -136,7 +136,6 @@ fn png_fast(img: &image::GrayImage) -> Result<Vec<u8>, String> {
 
 /// `/camera/calibration` of the camera model (ROS camera_info conventions).
 pub fn calibration(camera: &CameraModel, time_ns: u64) -> CameraCalibration {
-    let k = camera.k;
     CameraCalibration {
         timestamp: Some(timestamp(time_ns)),
         frame_id: CAMERA_FRAME.into(),
@@ -144,22 +143,9 @@ pub fn calibration(camera: &CameraModel, time_ns: u64) -> CameraCalibration {
         height: camera.height,
         distortion_model: "plumb_bob".into(),
         d: camera.distortion.to_vec(),
-        k: (0..9).map(|i| k[(i / 3, i % 3)]).collect(),
+        k: camera.k_row_major().to_vec(),
         r: vec![1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0],
-        p: vec![
-            k[(0, 0)],
-            k[(0, 1)],
-            k[(0, 2)],
-            0.0,
-            k[(1, 0)],
-            k[(1, 1)],
-            k[(1, 2)],
-            0.0,
-            0.0,
-            0.0,
-            1.0,
-            0.0,
-        ],
+        p: camera.projection_row_major().to_vec(),
     }
 }
 
