@@ -2,10 +2,12 @@
 //! (latest-wins) and log (every frame), with bounded queues so that nothing
 //! waits on the log and the link always gets the newest measurement.
 
+use super::run_stats::{PipelineMeters, ResourceSummary, StatsThread};
 use crate::camera::CameraModel;
 use crate::config::Config;
 use crate::frame::Frame;
 use crate::link::{Link, LinkHandle};
+use crate::log::review::Histogram;
 use crate::log::{FlightLog, LogHandle};
 use crate::measure::Measurer;
 use crate::measure::mount::Mount;
@@ -80,6 +82,10 @@ pub struct RunSummary {
     pub log_dropped: u64,
     pub link: Option<crate::link::LinkStats>,
     pub interrupted: bool,
+    /// CPU, memory and queues (the `/drogue/stats` figures).
+    pub resources: ResourceSummary,
+    /// Capture to first pose message sent, ms.
+    pub latency_ms: Histogram,
 }
 
 fn open_source(spec: &SourceSpec) -> Result<Box<dyn FrameSource>, RunError> {
@@ -153,6 +159,7 @@ fn spawn_measurement(
     link: LinkHandle,
     log: LogHandle,
     counts: Arc<Mutex<RunSummary>>,
+    meters: Arc<PipelineMeters>,
 ) -> (SyncSender<Arc<Frame>>, std::thread::JoinHandle<()>) {
     // Capacity 1: at most one frame waits; a newer one finding it full is
     // skipped for measurement (still logged), so latency never builds up.
@@ -174,6 +181,7 @@ fn spawn_measurement(
                 c.detected += u64::from(m.detection.is_some());
             }
             log.measurement(m, record, &mount);
+            meters.frame_measured();
         }
     });
     (tx, handle)
@@ -226,21 +234,35 @@ pub fn run(
     let stop = Arc::new(AtomicBool::new(false));
     watch_signals(&rt, Arc::clone(&stop));
 
-    // Link events (sent and received messages) go to the log.
+    // Link events (sent and received messages) go to the log; the capture →
+    // send latency of each frame's first pose message is counted on the way.
     let events = link.events();
     let event_log = log.clone();
     let events_done = Arc::new(AtomicBool::new(false));
     let events_done_flag = Arc::clone(&events_done);
     let event_thread = std::thread::spawn(move || {
+        let mut latency_ms = Histogram::default();
+        let mut last_sent_capture = None;
         loop {
             match events.recv_timeout(Duration::from_millis(100)) {
-                Some(ev) => event_log.mavlink(ev),
+                Some(ev) => {
+                    if let (true, Some(captured)) = (ev.outgoing, ev.capture_time_ns)
+                        && last_sent_capture != Some(captured)
+                    {
+                        last_sent_capture = Some(captured);
+                        latency_ms.add(ev.time_ns.saturating_sub(captured) as f64 * 1e-6);
+                    }
+                    event_log.mavlink(ev);
+                }
                 None if events_done_flag.load(Ordering::SeqCst) => break,
                 None => {}
             }
         }
+        latency_ms
     });
 
+    let meters = Arc::new(PipelineMeters::default());
+    let stats_thread = StatsThread::spawn(Arc::clone(&meters), log.clone(), link.events());
     let counts = Arc::new(Mutex::new(RunSummary::default()));
     let (frame_tx, measure_thread) = spawn_measurement(
         measurer,
@@ -248,6 +270,7 @@ pub fn run(
         link.clone(),
         log.clone(),
         Arc::clone(&counts),
+        Arc::clone(&meters),
     );
 
     // Sources with a timeline (sim, log) are replayed at its pace unless
@@ -265,10 +288,11 @@ pub fn run(
     let max_frames = args.max_frames.unwrap_or(u64::MAX);
     let (mut frames, mut skipped, mut unreadable, mut late) = (0u64, 0u64, 0u64, 0u64);
     while frames < max_frames && !stop.load(Ordering::SeqCst) {
-        let Some(item) = source.next_frame() else {
+        let Some(item) = meters.time_source(|| source.next_frame()) else {
             break;
         };
         frames += 1;
+        meters.frames_in.fetch_add(1, Ordering::Relaxed);
         let mut frame = match item {
             Ok(f) => f,
             Err(e) => {
@@ -308,6 +332,7 @@ pub fn run(
             Ok(()) => {}
             Err(TrySendError::Full(f)) => {
                 skipped += 1;
+                meters.skipped.fetch_add(1, Ordering::Relaxed);
                 tracing::debug!(seq = f.seq, "measurement busy: frame skipped");
             }
             Err(TrySendError::Disconnected(_)) => {
@@ -319,7 +344,8 @@ pub fn run(
     let _ = measure_thread.join();
     link.shutdown();
     events_done.store(true, Ordering::SeqCst);
-    let _ = event_thread.join();
+    let latency_ms = event_thread.join().unwrap_or_default();
+    let resources = stats_thread.finish();
     let link_stats = link.stats();
     tracing::info!(
         frames,
@@ -340,6 +366,8 @@ pub fn run(
     summary.interrupted = stop.load(Ordering::SeqCst);
     summary.log_files = log_summary.files;
     summary.link = Some(link_stats);
+    summary.resources = resources;
+    summary.latency_ms = latency_ms;
     summary.log_dropped = log_summary.dropped_queue_full + log_summary.dropped_write_error;
     if skipped > 0 {
         tracing::warn!("{skipped} frames were not measured (measurement busy)");
@@ -370,9 +398,30 @@ impl RunSummary {
                 l.reconnects
             )
         });
+        let latency = if self.latency_ms.count() == 0 {
+            "no pose sent".to_string()
+        } else {
+            format!(
+                "p50 {:.2}  p95 {:.2}  p99 {:.2}  max {:.2} ms over {} poses",
+                self.latency_ms.quantile(0.50),
+                self.latency_ms.quantile(0.95),
+                self.latency_ms.quantile(0.99),
+                self.latency_ms.max(),
+                self.latency_ms.count()
+            )
+        };
+        let r = &self.resources;
+        let resources_line = format!(
+            "\ncapture → send: {latency}\nresources: pipeline CPU {:.1} % of one core (source {:.1} % \
+             besides), peak resident memory {:.1} MB, log queue at most {} items",
+            r.pipeline_cpu_pct,
+            r.source_cpu_pct,
+            r.peak_rss_bytes as f64 / 1e6,
+            r.max_log_queue
+        );
         format!(
             "run {}: {} frames, {} measured, {} detected ({rate:.1} %), {} skipped (measurement busy), \
-             {} unreadable, source late {} times{}\nlog: {}",
+             {} unreadable, source late {} times{}{resources_line}\nlog: {}",
             if self.interrupted {
                 "interrupted"
             } else {

@@ -94,6 +94,15 @@ impl EventReceiver {
     pub fn dropped(&self) -> u64 {
         self.0.dropped.load(Ordering::Relaxed)
     }
+
+    /// Events waiting now (for the run's queue statistics).
+    pub fn len(&self) -> usize {
+        lock(&self.0.events).len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
 }
 
 #[cfg(test)]
