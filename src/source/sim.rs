@@ -2,9 +2,12 @@
 
 use super::{FrameSource, SourceError, SourceItem};
 use crate::camera::CameraModel;
+use crate::config::SitlAnchor;
 use crate::frame::{Frame, FrameOrigin};
 use crate::measure::mount::MountConfig;
-use drogue_sim::{MountSpec, Scenario, Simulator};
+use drogue_sim::trajectory::World;
+use drogue_sim::{MountSpec, NED_FRAME_AUTOPILOT, Scenario, Simulator};
+use nalgebra::{Quaternion, Rotation3, UnitQuaternion, Vector3};
 
 /// The simulator's camera mount in the config's terms (both use the mount
 /// convention of ARCHITECTURE.md section 3).
@@ -34,6 +37,8 @@ pub struct SimSource {
     sim: Simulator,
     camera: CameraModel,
     mount: MountConfig,
+    /// Frames handed out so far (the next frame's time is this / fps).
+    delivered: u64,
 }
 
 impl SimSource {
@@ -49,7 +54,13 @@ impl SimSource {
             camera: camera_model(&sim)?,
             mount: mount_config(sim.mount()),
             sim,
+            delivered: 0,
         })
+    }
+
+    /// The simulator (its scenario, camera, timeline).
+    pub fn simulator(&self) -> &Simulator {
+        &self.sim
     }
 
     /// The simulator, for the SITL closed loop (receiver pose from outside).
@@ -60,6 +71,161 @@ impl SimSource {
     pub fn inner_radius_m(&self) -> f64 {
         self.sim.inner_radius_m()
     }
+
+    /// The next frame's time on the scenario's timeline, ns since the Unix
+    /// epoch (its `capture_time_ns` when the run is not paced).
+    pub fn next_frame_time_ns(&self) -> u64 {
+        self.sim.start_time_ns() + (self.delivered as f64 / self.sim.fps() * 1e9).round() as u64
+    }
+
+    /// SITL closed loop: renders the next frame with the receiver at the
+    /// autopilot's pose (its local NED), captured at `capture_time_ns`. The
+    /// frame's truth is put in the autopilot's frame too (`ned_frame =
+    /// "autopilot"`), so it compares directly with what the autopilot and
+    /// LANDING_TARGET in LOCAL_NED say.
+    pub fn next_frame_from_autopilot(
+        &mut self,
+        anchor: &AutopilotAnchor,
+        position_autopilot_m: [f64; 3],
+        q_autopilot_body: [f64; 4],
+        capture_time_ns: u64,
+    ) -> Option<SourceItem> {
+        let t_s = self.delivered as f64 / self.sim.fps();
+        let (position_world_m, q_world_body) =
+            anchor.to_world(position_autopilot_m, q_autopilot_body, t_s);
+        self.sim.set_receiver_pose(position_world_m, q_world_body);
+        let mut item = self.next_frame()?;
+        if let Ok(frame) = &mut item {
+            frame.capture_time_ns = capture_time_ns;
+            if let FrameOrigin::Sim(truth) = &mut frame.origin {
+                anchor.truth_to_autopilot(truth);
+                truth.capture_time_ns = capture_time_ns;
+            }
+        }
+        Some(item)
+    }
+}
+
+/// Where the autopilot's local NED (origin at its EKF origin, any heading)
+/// sits in the scenario's world NED, for the SITL closed loop.
+///
+/// Fixed at the autopilot's first pose: the vehicle is put where the
+/// scenario's scripted receiver is at t = 0 (pre-contact, the drogue ahead of
+/// it), its heading turned onto the receiver's heading (a rotation about down
+/// only: both frames are NED). With [`SitlAnchor::Tanker`] the placement then
+/// moves at the tanker's constant velocity, so a vehicle that holds its
+/// position keeps station behind the drogue; with [`SitlAnchor::World`] it
+/// stays put and the vehicle must fly the tanker's speed and course.
+///
+/// world = R_world_autopilot (p_autopilot - autopilot_origin) + world_origin
+/// + velocity * t.
+#[derive(Clone, Debug, PartialEq)]
+pub struct AutopilotAnchor {
+    /// Yaw of the autopilot's NED in the world's (world heading minus
+    /// autopilot heading at the first pose), radians.
+    pub yaw_world_autopilot_rad: f64,
+    /// The vehicle's first position, autopilot NED, metres.
+    pub origin_autopilot_m: [f64; 3],
+    /// Where it was put: the scripted receiver at t = 0, world NED, metres.
+    pub origin_world_m: [f64; 3],
+    /// How the placement moves, world NED, m/s (the tanker's velocity, or 0).
+    pub velocity_world_mps: [f64; 3],
+}
+
+fn yaw_of(q: &UnitQuaternion<f64>) -> f64 {
+    q.euler_angles().2
+}
+
+impl AutopilotAnchor {
+    /// The anchor for the autopilot's first pose (`position_autopilot_m`,
+    /// `q_autopilot_body`) in `scenario`'s world; `None` for a non-finite or
+    /// zero pose.
+    pub fn new(
+        scenario: &Scenario,
+        mode: SitlAnchor,
+        position_autopilot_m: [f64; 3],
+        q_autopilot_body: [f64; 4],
+    ) -> Option<Self> {
+        let q_ap = unit_quaternion(q_autopilot_body)?;
+        if !position_autopilot_m.iter().all(|v| v.is_finite()) {
+            return None;
+        }
+        // The scripted world at t = 0 (a fresh copy: same seed, same start).
+        let start = World::new(scenario).advance();
+        let q_world_receiver =
+            UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix(&start.r_ned_body));
+        let velocity = match mode {
+            SitlAnchor::Tanker => {
+                start.r_ned_tanker * Vector3::new(scenario.tanker.airspeed_mps, 0.0, 0.0)
+            }
+            SitlAnchor::World => Vector3::zeros(),
+        };
+        Some(Self {
+            yaw_world_autopilot_rad: wrap_pi(yaw_of(&q_world_receiver) - yaw_of(&q_ap)),
+            origin_autopilot_m: position_autopilot_m,
+            origin_world_m: start.receiver_ned.into(),
+            velocity_world_mps: velocity.into(),
+        })
+    }
+
+    fn q_world_autopilot(&self) -> UnitQuaternion<f64> {
+        UnitQuaternion::from_axis_angle(&Vector3::z_axis(), self.yaw_world_autopilot_rad)
+    }
+
+    fn moved_origin_world(&self, t_s: f64) -> Vector3<f64> {
+        Vector3::from(self.origin_world_m) + Vector3::from(self.velocity_world_mps) * t_s
+    }
+
+    /// An autopilot pose (local NED, body → NED) in the world at `t_s`
+    /// (scenario time). An unusable quaternion gives a zero one, which the
+    /// simulator ignores.
+    pub fn to_world(
+        &self,
+        position_autopilot_m: [f64; 3],
+        q_autopilot_body: [f64; 4],
+        t_s: f64,
+    ) -> ([f64; 3], [f64; 4]) {
+        let r = self.q_world_autopilot();
+        let p = r * (Vector3::from(position_autopilot_m) - Vector3::from(self.origin_autopilot_m))
+            + self.moved_origin_world(t_s);
+        let q = unit_quaternion(q_autopilot_body)
+            .map(|q| wxyz(&(r * q)))
+            .unwrap_or([0.0; 4]);
+        (p.into(), q)
+    }
+
+    /// A world position at `t_s` in the autopilot's local NED.
+    pub fn position_to_autopilot(&self, position_world_m: [f64; 3], t_s: f64) -> [f64; 3] {
+        let p = self.q_world_autopilot().inverse()
+            * (Vector3::from(position_world_m) - self.moved_origin_world(t_s))
+            + Vector3::from(self.origin_autopilot_m);
+        p.into()
+    }
+
+    /// The NED fields of a frame's truth, world → autopilot NED.
+    pub fn truth_to_autopilot(&self, truth: &mut drogue_sim::FrameTruth) {
+        truth.position_ned = self.position_to_autopilot(truth.position_ned, truth.t);
+        truth.receiver_position_ned =
+            self.position_to_autopilot(truth.receiver_position_ned, truth.t);
+        if let Some(q) = unit_quaternion(truth.receiver_q_ned_body) {
+            truth.receiver_q_ned_body = wxyz(&(self.q_world_autopilot().inverse() * q));
+        }
+        truth.ned_frame = NED_FRAME_AUTOPILOT.into();
+    }
+}
+
+fn unit_quaternion(q: [f64; 4]) -> Option<UnitQuaternion<f64>> {
+    let q = Quaternion::new(q[0], q[1], q[2], q[3]);
+    (q.coords.iter().all(|c| c.is_finite()) && q.norm() > 1e-9)
+        .then(|| UnitQuaternion::from_quaternion(q))
+}
+
+fn wxyz(q: &UnitQuaternion<f64>) -> [f64; 4] {
+    [q.w, q.i, q.j, q.k]
+}
+
+fn wrap_pi(a: f64) -> f64 {
+    (a + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU) - std::f64::consts::PI
 }
 
 impl FrameSource for SimSource {
@@ -78,6 +244,7 @@ impl FrameSource for SimSource {
     fn next_frame(&mut self) -> Option<SourceItem> {
         let start_ns = self.sim.start_time_ns();
         let (image, truth) = self.sim.next_frame()?;
+        self.delivered += 1;
         Some(Ok(Frame {
             seq: truth.seq,
             capture_time_ns: start_ns + (truth.t * 1e9).round() as u64,
