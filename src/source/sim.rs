@@ -253,3 +253,102 @@ impl FrameSource for SimSource {
         }))
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn yaw_q(yaw: f64) -> [f64; 4] {
+        wxyz(&UnitQuaternion::from_euler_angles(0.01, -0.02, yaw))
+    }
+
+    fn close(a: [f64; 3], b: [f64; 3], tol: f64) -> bool {
+        (0..3).all(|i| (a[i] - b[i]).abs() <= tol)
+    }
+
+    #[test]
+    fn first_pose_lands_on_the_scripted_receiver_and_keeps_its_tilt() {
+        let mut sc = Scenario::builtin("approach").unwrap();
+        sc.receiver.wobble_deg = 0.0;
+        sc.tanker.heading_deg = 40.0;
+        let p0 = [12.0, -3.0, -20.0];
+        let a = AutopilotAnchor::new(&sc, SitlAnchor::Tanker, p0, yaw_q(-2.0)).unwrap();
+        let start = World::new(&sc).advance();
+        let (p, q) = a.to_world(p0, yaw_q(-2.0), 0.0);
+        assert!(close(p, start.receiver_ned.into(), 1e-9));
+        // Heading: the scripted receiver's (tanker heading + trim yaw 0);
+        // roll and pitch: the autopilot's own.
+        let (r, pi, y) = unit_quaternion(q).unwrap().euler_angles();
+        assert!((y - 40f64.to_radians()).abs() < 1e-9, "{y}");
+        assert!((r - 0.01).abs() < 1e-9 && (pi + 0.02).abs() < 1e-9);
+        // One metre ahead of the vehicle (its heading) is one metre ahead of
+        // the receiver along the tanker's heading.
+        let ahead = [p0[0] + (-2f64).cos(), p0[1] + (-2f64).sin(), p0[2]];
+        let (pa, _) = a.to_world(ahead, yaw_q(-2.0), 0.0);
+        let h = 40f64.to_radians();
+        let want = [
+            start.receiver_ned.x + h.cos(),
+            start.receiver_ned.y + h.sin(),
+            start.receiver_ned.z,
+        ];
+        assert!(close(pa, want, 1e-9), "{pa:?} vs {want:?}");
+    }
+
+    #[test]
+    fn tanker_anchor_moves_at_the_tanker_velocity_world_anchor_stays() {
+        let mut sc = Scenario::builtin("approach").unwrap();
+        sc.tanker.heading_deg = 90.0;
+        sc.tanker.airspeed_mps = 100.0;
+        let p0 = [0.0, 0.0, -10.0];
+        let tanker = AutopilotAnchor::new(&sc, SitlAnchor::Tanker, p0, yaw_q(0.3)).unwrap();
+        let world = AutopilotAnchor::new(&sc, SitlAnchor::World, p0, yaw_q(0.3)).unwrap();
+        let (a0, _) = tanker.to_world(p0, yaw_q(0.3), 0.0);
+        let (a2, _) = tanker.to_world(p0, yaw_q(0.3), 2.0);
+        // Heading 90 degrees: east at 100 m/s.
+        assert!(close(
+            [a2[0] - a0[0], a2[1] - a0[1], a2[2] - a0[2]],
+            [0.0, 200.0, 0.0],
+            1e-9
+        ));
+        let (w0, _) = world.to_world(p0, yaw_q(0.3), 0.0);
+        let (w2, _) = world.to_world(p0, yaw_q(0.3), 2.0);
+        assert!(close(w0, w2, 1e-12));
+        // Round trip at any time.
+        let p = [3.0, -7.0, 1.5];
+        for a in [&tanker, &world] {
+            let (pw, _) = a.to_world(p, yaw_q(0.3), 1.7);
+            assert!(close(a.position_to_autopilot(pw, 1.7), p, 1e-9));
+        }
+    }
+
+    #[test]
+    fn closed_loop_frame_carries_its_truth_in_the_autopilot_frame() {
+        let mut src = SimSource::open("approach").unwrap();
+        let p0 = [5.0, 6.0, -30.0];
+        let q0 = yaw_q(1.0);
+        let anchor =
+            AutopilotAnchor::new(src.simulator().scenario(), SitlAnchor::Tanker, p0, q0).unwrap();
+        let capture = 1_800_000_000_123_456_789;
+        let frame = src
+            .next_frame_from_autopilot(&anchor, p0, q0, capture)
+            .unwrap()
+            .unwrap();
+        assert_eq!(frame.capture_time_ns, capture);
+        let t = frame.truth().unwrap();
+        assert_eq!(t.ned_frame, NED_FRAME_AUTOPILOT);
+        assert_eq!(t.capture_time_ns, capture);
+        assert!(close(t.receiver_position_ned, p0, 1e-9));
+        let dq = unit_quaternion(t.receiver_q_ned_body)
+            .unwrap()
+            .angle_to(&unit_quaternion(q0).unwrap());
+        assert!(dq < 1e-9);
+        // The body-frame truth does not depend on the frame of the NED fields.
+        let q = unit_quaternion(q0).unwrap();
+        let body = q.inverse() * (Vector3::from(t.position_ned) - Vector3::from(p0));
+        assert!(close(body.into(), t.position_body, 1e-9));
+        assert_eq!(
+            src.next_frame_time_ns(),
+            src.simulator().start_time_ns() + 33_333_333
+        );
+    }
+}

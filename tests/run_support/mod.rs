@@ -232,6 +232,8 @@ pub fn only_log(dir: &Path) -> PathBuf {
 /// One logged message: topic, log time, payload.
 pub struct Logged {
     pub topic: String,
+    /// The MCAP sequence (the frame's for everything derived from a frame).
+    pub sequence: u32,
     pub log_time_ns: u64,
     pub data: Vec<u8>,
 }
@@ -245,6 +247,7 @@ pub fn read_log(path: &Path) -> Vec<Logged> {
             let m = m.expect("a readable message");
             Logged {
                 topic: m.channel.topic.clone(),
+                sequence: m.sequence,
                 log_time_ns: m.log_time,
                 data: m.data.to_vec(),
             }
