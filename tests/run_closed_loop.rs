@@ -78,6 +78,12 @@ const TURN_RAD: f64 = 4.0 * std::f64::consts::PI / 180.0;
 const STEP_S: (f64, f64) = (3.0, 4.0);
 const TURN_S: (f64, f64) = (6.0, 7.0);
 const SILENT_S: (f64, f64) = (7.8, 8.3);
+/// How old the pose a frame is rendered or converted with may be: the
+/// telemetry comes at 50 Hz, the link uses samples within 0.1 s of a time,
+/// plus scheduling delays of this test's peer thread on a busy machine. The
+/// motion in this window is all the slack a check gets: while the vehicle
+/// holds still the checks are exact.
+const LATE_S: f64 = 0.25;
 
 fn smoothstep(x: f64) -> f64 {
     let x = x.clamp(0.0, 1.0);
@@ -251,8 +257,8 @@ fn the_view_and_landing_target_ned_follow_the_autopilot() {
         let e = norm(sub(t.position_ned, drogue));
         assert!(e < 0.002, "truth drogue {:?} vs {drogue:?}", t.position_ned);
         let s = secs(t.capture_time_ns);
-        // Rendered from the latest sample at or before the capture (50 Hz).
-        let near = window(s, 0.1, 0.0, 0.001);
+        // Rendered from the latest sample at or before the capture.
+        let near = window(s, LATE_S, 0.0, 0.001);
         let receiver_err = near
             .iter()
             .map(|&w| norm(sub(t.receiver_position_ned, pose_f64(&scripted(w)).0)))
@@ -320,7 +326,7 @@ fn the_view_and_landing_target_ned_follow_the_autopilot() {
     for r in &body {
         let s = secs(r.target.time_usec * 1000);
         let m = [r.target.x, r.target.y, r.target.z].map(f64::from);
-        let err = window(s, 0.1, 0.0, 0.001)
+        let err = window(s, LATE_S, 0.0, 0.001)
             .iter()
             .map(|&w| norm(sub(m, body_of(&scripted(w)))))
             .fold(f64::INFINITY, f64::min);
@@ -332,7 +338,7 @@ fn the_view_and_landing_target_ned_follow_the_autopilot() {
     }
     // LOCAL_NED: the drogue's fixed place in the autopilot's frame, up to the
     // difference between the pose the frame was rendered with and the one
-    // the link converts with (each a sample within 0.1 s of the capture).
+    // the link converts with (each one within LATE_S of the capture).
     let mut worst_ned: f64 = 0.0;
     for r in &ned {
         let s = secs(r.target.time_usec * 1000);
@@ -341,7 +347,7 @@ fn the_view_and_landing_target_ned_follow_the_autopilot() {
             "LANDING_TARGET in LOCAL_NED at {s:.3} s, while the autopilot was silent"
         );
         let m = [r.target.x, r.target.y, r.target.z].map(f64::from);
-        let w = window(s, 0.1, 0.1, 0.005);
+        let w = window(s, LATE_S, LATE_S, 0.01);
         let mut allowance: f64 = 0.0;
         for &a in &w {
             for &b in &w {
