@@ -59,6 +59,9 @@ pub struct RunConfig {
     pub vehicle_pose_timeout_s: f64,
     /// `mavlink`: how the autopilot's local NED sits in the scenario's world.
     pub sitl_anchor: SitlAnchor,
+    /// `mavlink`: frames are captured this long before they are rendered, so
+    /// the autopilot's pose at the capture is interpolated, not extrapolated.
+    pub vehicle_pose_delay_ms: u64,
 }
 
 /// `[run] vehicle_pose`: who flies the simulated receiver.

@@ -129,6 +129,13 @@ fn open_frames(
                     "[run] vehicle_pose_timeout_s = {timeout} must be > 0"
                 )));
             }
+            let (delay, max_age) = (config.run.vehicle_pose_delay_ms, config.link.max_age_ms);
+            if max_age > 0 && delay >= max_age {
+                return Err(RunError::Setup(format!(
+                    "[run] vehicle_pose_delay_ms = {delay} must be below [link] max_age_ms = \
+                     {max_age}: every frame would be too old to send"
+                )));
+            }
             let sim = SimSource::open(name).map_err(|e| RunError::Setup(e.to_string()))?;
             Ok(Frames::ClosedLoop(Box::new(ClosedLoop {
                 sim,
@@ -137,6 +144,7 @@ fn open_frames(
                 held: None,
                 stale: false,
                 held_frames: 0,
+                dropped: 0,
             })))
         }
         (VehiclePoseSource::Mavlink, _) => Err(RunError::Setup(
@@ -158,12 +166,38 @@ struct ClosedLoop {
     held: Option<VehiclePose>,
     stale: bool,
     held_frames: u64,
+    /// Frames dropped because the rendering fell behind.
+    dropped: u64,
 }
 
 impl ClosedLoop {
-    /// The next frame, captured at `capture_time_ns` (ns, Unix) from the
-    /// autopilot's pose at that time, or the last one while it is stale.
-    fn next_frame(&mut self, link: &LinkHandle, capture_time_ns: u64) -> Option<SourceItem> {
+    /// The next frame on the wall clock, captured `delay_ns` before it is
+    /// rendered, from the autopilot's pose at the capture (or the last one
+    /// while it is stale). Frames the run is too late for are dropped, as a
+    /// camera drops them: the scenario's clock stays on the autopilot's.
+    fn next_frame(
+        &mut self,
+        link: &LinkHandle,
+        pacer: &mut Pacer,
+        delay_ns: u64,
+    ) -> Option<SourceItem> {
+        let due_ns = loop {
+            match pacer.wait_until_due_or_drop(self.sim.next_frame_time_ns()) {
+                Some(due) => break due,
+                None => {
+                    self.sim.skip_frame()?;
+                    self.dropped += 1;
+                    pacer.late += 1;
+                    if self.dropped.is_power_of_two() {
+                        tracing::warn!(
+                            dropped = self.dropped,
+                            "closed loop: rendering behind the frame rate, frames dropped"
+                        );
+                    }
+                }
+            }
+        };
+        let capture_time_ns = due_ns.saturating_sub(delay_ns);
         let pose = match (link.vehicle_pose_at(capture_time_ns), self.held) {
             (Some(p), _) => {
                 if self.stale {
@@ -230,10 +264,13 @@ impl ClosedLoop {
 }
 
 /// Waits until the autopilot's pose is on the link (the link keeps
-/// heartbeating meanwhile). `Ok(false)`: a signal ended the wait.
+/// heartbeating meanwhile), then `delay` more, so that the first frame's
+/// capture time (`delay` before it is rendered) comes after the first
+/// report. `Ok(false)`: a signal ended the wait.
 fn wait_for_autopilot_pose(
     link: &LinkHandle,
     timeout_s: f64,
+    delay: Duration,
     stop: &AtomicBool,
 ) -> Result<bool, RunError> {
     let deadline = Instant::now() + Duration::from_secs_f64(timeout_s);
@@ -243,7 +280,8 @@ fn wait_for_autopilot_pose(
             if said {
                 tracing::info!("closed loop: the autopilot's pose arrived");
             }
-            return Ok(true);
+            std::thread::sleep(delay);
+            return Ok(!stop.load(Ordering::SeqCst));
         }
         if stop.load(Ordering::SeqCst) {
             return Ok(false);
@@ -306,6 +344,24 @@ impl Pacer {
             std::thread::sleep(wait);
         }
         self.started_ns + (offset + self.lag).as_nanos() as u64
+    }
+
+    /// Like [`Pacer::wait_until_due`] but the timeline never moves: `None`
+    /// when the frame is more than [`MAX_SOURCE_LAG`] late (the caller drops
+    /// it). For the closed loop, whose scenario clock must stay on the
+    /// autopilot's (wall) clock.
+    fn wait_until_due_or_drop(&mut self, timeline_ns: u64) -> Option<u64> {
+        let first = *self.first_ns.get_or_insert(timeline_ns);
+        let offset = Duration::from_nanos(timeline_ns.saturating_sub(first));
+        let now = Instant::now();
+        let due = self.started + offset;
+        if now > due + MAX_SOURCE_LAG {
+            return None;
+        }
+        if let Some(wait) = due.checked_duration_since(now) {
+            std::thread::sleep(wait);
+        }
+        Some(self.started_ns + offset.as_nanos() as u64)
     }
 }
 
@@ -483,15 +539,17 @@ pub fn run(
     // --fast (see Pacer). The closed loop first waits for the autopilot.
     let mut failure = None;
     let go = match &frames_in {
-        Frames::ClosedLoop(_) => {
-            wait_for_autopilot_pose(&link, config.run.vehicle_pose_timeout_s, &stop).unwrap_or_else(
-                |e| {
-                    tracing::error!("{e}");
-                    failure = Some(e);
-                    false
-                },
-            )
-        }
+        Frames::ClosedLoop(_) => wait_for_autopilot_pose(
+            &link,
+            config.run.vehicle_pose_timeout_s,
+            Duration::from_millis(config.run.vehicle_pose_delay_ms),
+            &stop,
+        )
+        .unwrap_or_else(|e| {
+            tracing::error!("{e}");
+            failure = Some(e);
+            false
+        }),
         Frames::Source(_) => true,
     };
     let paced = frames_in.source().recorded_timeline() && !args.fast;
@@ -501,10 +559,11 @@ pub fn run(
     while go && frames < max_frames && !stop.load(Ordering::SeqCst) {
         let item = match &mut frames_in {
             Frames::Source(source) => source.next_frame(),
-            // Rendered at its capture time, from the pose at that time.
+            // Rendered [run] vehicle_pose_delay_ms after its capture, from
+            // the autopilot's pose at the capture.
             Frames::ClosedLoop(cl) => {
-                let capture_ns = pacer.wait_until_due(cl.sim.next_frame_time_ns(), frames);
-                cl.next_frame(&link, capture_ns)
+                let delay_ns = config.run.vehicle_pose_delay_ms.saturating_mul(1_000_000);
+                cl.next_frame(&link, &mut pacer, delay_ns)
             }
         };
         let Some(item) = item else {

@@ -78,6 +78,14 @@ impl SimSource {
         self.sim.start_time_ns() + (self.delivered as f64 / self.sim.fps() * 1e9).round() as u64
     }
 
+    /// Moves past the next frame without rendering it (a dropped frame);
+    /// `None` at the end of the scenario.
+    pub fn skip_frame(&mut self) -> Option<()> {
+        self.sim.next_truth()?;
+        self.delivered += 1;
+        Some(())
+    }
+
     /// SITL closed loop: renders the next frame with the receiver at the
     /// autopilot's pose (its local NED), captured at `capture_time_ns`. The
     /// frame's truth is put in the autopilot's frame too (`ned_frame =

@@ -111,6 +111,7 @@ fn peer_loop(
     received: Arc<Mutex<Vec<Received>>>,
 ) {
     let boot = Instant::now();
+    let boot_unix_ns = unix_now_ns();
     let period = Duration::from_secs_f64(1.0 / rate_hz);
     let mut link: Option<SocketAddr> = None;
     let mut seq = 0u8;
@@ -160,8 +161,10 @@ fn peer_loop(
         }
         if now >= next_telemetry {
             next_telemetry += period;
-            if let Some(pose) = script.as_ref().and_then(|s| s(unix_now_ns())) {
-                let time_boot_ms = boot.elapsed().as_millis() as u32;
+            // The pose at exactly the (whole millisecond) time it is stamped with.
+            let time_boot_ms = boot.elapsed().as_millis() as u32;
+            let stamp_unix_ns = boot_unix_ns + u64::from(time_boot_ms) * 1_000_000;
+            if let Some(pose) = script.as_ref().and_then(|s| s(stamp_unix_ns)) {
                 let [x, y, z] = pose.position_ned_m;
                 let [roll, pitch, yaw] = pose.rpy_rad;
                 out.push(MavMessage::ATTITUDE(ATTITUDE_DATA {
