@@ -20,7 +20,7 @@ use image::GrayImage;
 const GRID: usize = 16;
 
 /// A tube (hose, probe): axis segment a -> b in the camera frame, radii.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Tube {
     pub a: V3,
     pub b: V3,
@@ -132,6 +132,26 @@ impl TubeAxis {
     }
 }
 
+/// One pixel a tube covers: its index in the frame, the depth of the
+/// tube's axis along the pixel's ray, its coverage and radiance.
+#[derive(Clone, Copy, Debug)]
+struct TubeFragment {
+    index: u32,
+    depth: f64,
+    coverage: f32,
+    radiance: f32,
+}
+
+/// A tube's fragments, kept while the tube stays put in the camera frame:
+/// the probe is fixed to the receiver, so it rasterises once per run.
+#[derive(Clone, Debug, Default)]
+struct TubeLayer {
+    tube: Option<Tube>,
+    fragments: Vec<TubeFragment>,
+    /// Image rows holding any fragment.
+    rows: Vec<usize>,
+}
+
 /// The drogue in the camera frame.
 #[derive(Clone, Copy, Debug)]
 pub struct DrogueView {
@@ -200,6 +220,8 @@ pub struct Renderer {
     gauss: Vec<f32>,
     rad: Vec<f32>,
     scratch: Vec<f32>,
+    hose_layer: TubeLayer,
+    probe_layer: TubeLayer,
 }
 
 /// One image row of the sky, bilinear from the coarse grid.
@@ -330,6 +352,25 @@ fn inv_normal(p: f64) -> f64 {
     }
 }
 
+/// 2^23: adding it to a float in [0, 2^23) leaves the float's integer
+/// part (rounded to nearest) in the low mantissa bits.
+const F32_INT_MAGIC: f32 = 8_388_608.0;
+
+/// `floor(x)` for 0 <= x < 2^23 (a digital number), without a float to int
+/// cast: Rust's saturating `as` casts are scalar code, this vectorises.
+/// Bit-identical to `x as i32 as f32` on that range.
+#[inline]
+fn floor_dn(x: f32) -> f32 {
+    let nearest = (x + F32_INT_MAGIC) - F32_INT_MAGIC;
+    if nearest > x { nearest - 1.0 } else { nearest }
+}
+
+/// `x.clamp(0.0, 255.0) as i32 as u8` (truncation, NaN to 0), vectorisable.
+#[inline]
+fn dn_to_u8(x: f32) -> u8 {
+    (floor_dn(x.clamp(0.0, 255.0)) + F32_INT_MAGIC).to_bits() as u8
+}
+
 #[inline]
 fn clamp01(x: f64) -> f64 {
     x.clamp(0.0, 1.0)
@@ -387,6 +428,8 @@ impl Renderer {
             gauss,
             rad: vec![0.0; w * h],
             scratch: Vec::new(),
+            hose_layer: TubeLayer::default(),
+            probe_layer: TubeLayer::default(),
         }
     }
 
@@ -459,15 +502,15 @@ impl Renderer {
         }
         // 2. Rows the objects touch get a full radiance row; the others go
         // straight from the sky to the sensor.
-        let hose = scene.hose.and_then(|t| t.clipped(0.05));
-        let probe = scene.probe.and_then(|t| t.clipped(0.05));
-        let hose_spans = hose.map(|t| self.tube_spans(&t)).unwrap_or_default();
-        let probe_spans = probe.map(|t| self.tube_spans(&t)).unwrap_or_default();
+        let mut hose_layer = std::mem::take(&mut self.hose_layer);
+        let mut probe_layer = std::mem::take(&mut self.probe_layer);
+        self.rasterise_tube(&mut hose_layer, scene.hose.and_then(|t| t.clipped(0.05)));
+        self.rasterise_tube(&mut probe_layer, scene.probe.and_then(|t| t.clipped(0.05)));
         let bbox = self.drogue_bbox(&scene.drogue);
         let m = scene.blur_px;
         let blur_len = (m[0] * m[0] + m[1] * m[1]).sqrt();
         let mut dirty = vec![false; h];
-        for &(v, _, _) in hose_spans.iter().chain(&probe_spans) {
+        for &v in hose_layer.rows.iter().chain(&probe_layer.rows) {
             dirty[v] = true;
         }
         if let Some(b) = bbox {
@@ -487,21 +530,19 @@ impl Renderer {
                 &mut rad[v * w..(v + 1) * w],
             );
         }
-        if let Some(hose) = hose {
-            self.draw_tube(&mut rad, &hose, &hose_spans, None);
-        }
+        self.composite_tube(&mut rad, &hose_layer, None);
         if let Some(b) = bbox {
             self.draw_drogue(&mut rad, &scene.drogue, b);
             if blur_len >= 0.3 {
                 self.blur(&mut rad, b, m);
             }
         }
-        if let Some(probe) = probe {
-            self.draw_tube(&mut rad, &probe, &probe_spans, Some(&scene.drogue));
-        }
+        self.composite_tube(&mut rad, &probe_layer, Some(&scene.drogue));
         // 3. Sensor: vignette, glare veil, gain, noise, 8 bits.
         let img = self.sensor(&rad, &dirty, &sky_grid, &veil_grid, scene.noise_seed);
         self.rad = rad;
+        self.hose_layer = hose_layer;
+        self.probe_layer = probe_layer;
         img
     }
 
@@ -539,6 +580,7 @@ impl Renderer {
         ))
     }
 
+    #[inline(never)]
     fn draw_drogue(&self, rad: &mut [f32], d: &DrogueView, b: (usize, usize, usize, usize)) {
         let nc = d.normal.dot(&d.centre);
         if nc >= 0.0 {
@@ -687,19 +729,26 @@ impl Renderer {
         spans
     }
 
-    fn draw_tube(
-        &self,
-        rad: &mut [f32],
-        tube: &Tube,
-        spans: &[(usize, usize, usize)],
-        in_front_of: Option<&DrogueView>,
-    ) {
-        let Some(axis) = TubeAxis::new(tube) else {
+    /// The tube's fragments into `layer`, unless the layer already holds
+    /// this very tube (the probe, frame after frame).
+    #[inline(never)]
+    fn rasterise_tube(&self, layer: &mut TubeLayer, tube: Option<Tube>) {
+        if layer.tube.is_some() && layer.tube == tube {
+            return;
+        }
+        layer.tube = tube;
+        layer.fragments.clear();
+        layer.rows.clear();
+        let Some(tube) = tube else {
+            return;
+        };
+        let Some(axis) = TubeAxis::new(&tube) else {
             return;
         };
         let px = 1.0 / self.cam.fx;
         let base = tube.radiance;
-        for &(v, u0, u1) in spans {
+        for (v, u0, u1) in self.tube_spans(&tube) {
+            let first = layer.fragments.len();
             for u in u0..=u1 {
                 let ray = self.ray(u, v);
                 let Some((t, s, dist2)) = axis.closest(&ray) else {
@@ -718,27 +767,45 @@ impl Renderer {
                 if cov <= 0.0 {
                     continue;
                 }
-                if let Some(d) = in_front_of {
-                    // The drogue hides the tube where it is nearer.
-                    let nd = d.normal.dot(&ray);
-                    if nd < 0.0 {
-                        let tp = d.normal.dot(&d.centre) / nd;
-                        if tp > 0.0 && tp < t && (ray * tp - d.centre).norm() < d.canopy_radius {
-                            continue;
-                        }
-                    }
-                }
                 let k = k.min(1.0);
                 let shade = base * (0.7 + 0.45 * (1.0 - k * k).sqrt())
                     + 0.25 * base * (-((k - 0.45) / 0.12).powi(2)).exp();
-                let val = self.haze(shade) as f32;
-                let o = &mut rad[v * self.w + u];
-                *o += (val - *o) * cov as f32;
+                layer.fragments.push(TubeFragment {
+                    index: (v * self.w + u) as u32,
+                    depth: t,
+                    coverage: cov as f32,
+                    radiance: self.haze(shade) as f32,
+                });
+            }
+            if layer.fragments.len() > first {
+                layer.rows.push(v);
             }
         }
     }
 
+    /// Blends a tube's fragments into the frame; where `in_front_of` (the
+    /// drogue) is nearer than the tube, it hides the tube.
+    #[inline(never)]
+    fn composite_tube(&self, rad: &mut [f32], layer: &TubeLayer, in_front_of: Option<&DrogueView>) {
+        for f in &layer.fragments {
+            let index = f.index as usize;
+            if let Some(d) = in_front_of {
+                let ray = self.ray(index % self.w, index / self.w);
+                let nd = d.normal.dot(&ray);
+                if nd < 0.0 {
+                    let tp = d.normal.dot(&d.centre) / nd;
+                    if tp > 0.0 && tp < f.depth && (ray * tp - d.centre).norm() < d.canopy_radius {
+                        continue;
+                    }
+                }
+            }
+            let o = &mut rad[index];
+            *o += (f.radiance - *o) * f.coverage;
+        }
+    }
+
     /// Box blur along `m` (pixels, centred) within the box.
+    #[inline(never)]
     fn blur(&mut self, rad: &mut [f32], b: (usize, usize, usize, usize), m: [f64; 2]) {
         let len = (m[0] * m[0] + m[1] * m[1]).sqrt();
         let pad = (len / 2.0).ceil() as usize + 2;
@@ -782,6 +849,7 @@ impl Renderer {
         }
     }
 
+    #[inline(never)]
     fn sensor(
         &self,
         rad: &[f32],
@@ -843,15 +911,15 @@ impl Renderer {
                     let gauss = &self.gauss[start..start + n];
                     for ((o, &dn), &g) in dst[..n].iter_mut().zip(&row[..n]).zip(gauss) {
                         let q = dn.clamp(0.0, 255.0);
-                        let sigma = (read_var + shot * (q as i32 as f32)).sqrt();
-                        *o = (q + g * sigma + 0.5).clamp(0.0, 255.0) as i32 as u8;
+                        let sigma = (read_var + shot * floor_dn(q)).sqrt();
+                        *o = dn_to_u8(q + g * sigma + 0.5);
                     }
                     (dst, row) = (&mut dst[n..], &row[n..]);
                     start = 0;
                 }
             } else {
                 for (o, &dn) in dst.iter_mut().zip(&row) {
-                    *o = (dn + 0.5).clamp(0.0, 255.0) as i32 as u8;
+                    *o = dn_to_u8(dn + 0.5);
                 }
             }
         }
