@@ -142,8 +142,8 @@ struct TubeFragment {
     radiance: f32,
 }
 
-/// A tube's fragments, kept while the tube stays put in the camera frame:
-/// the probe is fixed to the receiver, so it rasterises once per run.
+/// A tube's fragments (kept for the next frame: the probe is fixed to the
+/// receiver, so its fragments stay valid while its tube is unchanged).
 #[derive(Clone, Debug, Default)]
 struct TubeLayer {
     tube: Option<Tube>,
@@ -505,7 +505,11 @@ impl Renderer {
         let mut hose_layer = std::mem::take(&mut self.hose_layer);
         let mut probe_layer = std::mem::take(&mut self.probe_layer);
         self.rasterise_tube(&mut hose_layer, scene.hose.and_then(|t| t.clipped(0.05)));
-        self.rasterise_tube(&mut probe_layer, scene.probe.and_then(|t| t.clipped(0.05)));
+        // The probe is fixed to the receiver: it rasterises once per run.
+        let probe = scene.probe.and_then(|t| t.clipped(0.05));
+        if probe_layer.tube != probe || probe.is_none() {
+            self.rasterise_tube(&mut probe_layer, probe);
+        }
         let bbox = self.drogue_bbox(&scene.drogue);
         let m = scene.blur_px;
         let blur_len = (m[0] * m[0] + m[1] * m[1]).sqrt();
@@ -729,13 +733,9 @@ impl Renderer {
         spans
     }
 
-    /// The tube's fragments into `layer`, unless the layer already holds
-    /// this very tube (the probe, frame after frame).
+    /// The tube's fragments into `layer`.
     #[inline(never)]
     fn rasterise_tube(&self, layer: &mut TubeLayer, tube: Option<Tube>) {
-        if layer.tube.is_some() && layer.tube == tube {
-            return;
-        }
         layer.tube = tube;
         layer.fragments.clear();
         layer.rows.clear();
