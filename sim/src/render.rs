@@ -282,8 +282,15 @@ fn hash2(ix: i32, iy: i32, seed: u32) -> f32 {
     (h & 0x00ff_ffff) as f32 / 16_777_216.0
 }
 
+/// `x.floor()` inlined: without SSE4.1, `f64::floor` is a libm call.
+#[inline]
+fn floor_f64(x: f64) -> f64 {
+    let t = x as i64 as f64;
+    if t > x { t - 1.0 } else { t }
+}
+
 fn value_noise(x: f64, y: f64, seed: u32) -> f32 {
-    let (fx, fy) = (x.floor(), y.floor());
+    let (fx, fy) = (floor_f64(x), floor_f64(y));
     let (ix, iy) = (fx as i32, fy as i32);
     let (tx, ty) = ((x - fx) as f32, (y - fy) as f32);
     let (sx, sy) = (tx * tx * (3.0 - 2.0 * tx), ty * ty * (3.0 - 2.0 * ty));
@@ -543,7 +550,7 @@ impl Renderer {
         }
         self.composite_tube(&mut rad, &probe_layer, Some(&scene.drogue));
         // 3. Sensor: vignette, glare veil, gain, noise, 8 bits.
-        let img = self.sensor(&rad, &dirty, &sky_grid, &veil_grid, scene.noise_seed);
+        let img = self.sensor(&mut rad, &dirty, &sky_grid, &veil_grid, scene.noise_seed);
         self.rad = rad;
         self.hose_layer = hose_layer;
         self.probe_layer = probe_layer;
@@ -852,7 +859,7 @@ impl Renderer {
     #[inline(never)]
     fn sensor(
         &self,
-        rad: &[f32],
+        rad: &mut [f32],
         dirty: &[bool],
         sky_grid: &[f32],
         veil_grid: &[f32],
@@ -877,14 +884,16 @@ impl Renderer {
         };
         let mask = self.gauss.len() - 1;
         let mut veil_row = vec![0f32; self.gw];
-        let mut row = vec![0f32; w];
+        let mut sky = vec![0f32; w];
         let mut grid_row = vec![0f32; self.gw];
         for v in 0..h {
-            if dirty[v] {
-                row.copy_from_slice(&rad[v * w..(v + 1) * w]);
+            // Rows with objects are finished in place (`rad` is scratch).
+            let row = if dirty[v] {
+                &mut rad[v * w..(v + 1) * w]
             } else {
-                sky_row(sky_grid, self.gw, v, &mut grid_row, &mut row);
-            }
+                sky_row(sky_grid, self.gw, v, &mut grid_row, &mut sky);
+                &mut sky[..]
+            };
             // Vignetting: 1 - k r^2 (0.6 + 0.4 r^2), r relative to the corner.
             let dv2 = (v as f32 - self.cam.cy as f32).powi(2);
             let k = l.vignette as f32;
@@ -898,7 +907,7 @@ impl Renderer {
                     let a = veil_grid[j * self.gw + i];
                     *slot = a + (veil_grid[(j + 1) * self.gw + i] - a) * fy;
                 }
-                add_lerp_columns(&veil_row, gain, &mut row);
+                add_lerp_columns(&veil_row, gain, row);
             }
             let dst = &mut out[v * w..(v + 1) * w];
             if noisy {
@@ -918,7 +927,7 @@ impl Renderer {
                     start = 0;
                 }
             } else {
-                for (o, &dn) in dst.iter_mut().zip(&row) {
+                for (o, &dn) in dst.iter_mut().zip(row.iter()) {
                     *o = dn_to_u8(dn + 0.5);
                 }
             }
