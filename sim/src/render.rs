@@ -591,6 +591,9 @@ impl Renderer {
         ))
     }
 
+    /// The drogue, pixel by pixel over its box: each pixel's ray meets the
+    /// drogue plane at in-plane (x, y); edges are anti-aliased by their
+    /// distance in pixels (metres over the pixel footprint |grad rho|).
     #[inline(never)]
     fn draw_drogue(&self, rad: &mut [f32], d: &DrogueView, b: (usize, usize, usize, usize)) {
         let nc = d.normal.dot(&d.centre);
@@ -605,77 +608,93 @@ impl Renderer {
             .collect();
         let half_strut = d.strut_width * 0.5;
         let disc = self.haze(d.disc) as f32;
+        let (n, e1, e2) = (d.normal, d.e1, d.e2);
+        // The plane point of ray (rx, ry, 1) at depth t is t * ray - centre:
+        // in-plane x = t * (e1 . ray) - e1 . centre (and y with e2).
+        let (e1_c, e2_c) = (e1.dot(&d.centre), e2.dot(&d.centre));
+        let reject = d.canopy_radius * 1.03;
+        let rim_inner = d.canopy_radius - d.rim_width;
+        let inv_canopy_span = 1.0 / (d.canopy_radius - d.inner_radius);
+        let r_in2 = d.inner_radius * d.inner_radius;
         for v in b.1..=b.3 {
             for u in b.0..=b.2 {
                 let ray = self.ray(u, v);
-                let nd = d.normal.dot(&ray);
+                let nd = n.x * ray.x + n.y * ray.y + n.z;
                 if nd >= -1e-12 {
                     continue;
                 }
                 let t = nc / nd;
-                let q = ray * t - d.centre;
-                let (x, y) = (q.dot(&d.e1), q.dot(&d.e2));
-                let rho = (x * x + y * y).sqrt();
-                if rho > d.canopy_radius * 1.03 {
+                let (a1, a2) = (
+                    e1.x * ray.x + e1.y * ray.y + e1.z,
+                    e2.x * ray.x + e2.y * ray.y + e2.z,
+                );
+                let (x, y) = (t * a1 - e1_c, t * a2 - e2_c);
+                let rho2 = x * x + y * y;
+                if rho2 > reject * reject {
                     continue;
                 }
-                // Pixel footprint: |grad rho| in metres per pixel.
+                let rho = rho2.sqrt();
+                // Pixel footprint |grad rho| (metres per pixel), from the ray
+                // steps su, sv (z = 0): d(plane point)/du = t (su - ray
+                // (n . su) / nd), projected on the radial direction.
                 let (su, sv) = self.ray_steps(u, v);
-                let dx_du = (su - ray * (d.normal.dot(&su) / nd)) * t;
-                let dx_dv = (sv - ray * (d.normal.dot(&sv) / nd)) * t;
-                let radial = if rho > 1e-9 {
-                    (d.e1 * x + d.e2 * y) / rho
-                } else {
-                    d.e1
+                let (x_r, y_r) = if rho > 1e-9 { (x, y) } else { (1.0, 0.0) };
+                let radial_ray = x_r * a1 + y_r * a2;
+                let grad = |s: &V3| {
+                    let radial_s =
+                        x_r * (e1.x * s.x + e1.y * s.y) + y_r * (e2.x * s.x + e2.y * s.y);
+                    radial_s - radial_ray * (n.x * s.x + n.y * s.y) / nd
                 };
-                let s = (dx_du.dot(&radial).powi(2) + dx_dv.dot(&radial).powi(2))
-                    .sqrt()
-                    .max(1e-12);
-                let alpha = clamp01(0.5 - (rho - d.canopy_radius) / s);
+                let (gu, gv) = (grad(&su), grad(&sv));
+                let norm_r = if rho > 1e-9 { rho } else { 1.0 };
+                let s = (t * (gu * gu + gv * gv).sqrt() / norm_r).max(1e-12);
+                let inv_s = 1.0 / s;
+                let alpha = clamp01(0.5 - (rho - d.canopy_radius) * inv_s);
                 if alpha <= 0.0 {
                     continue;
                 }
+                // Inner circle: supersampled 4x4 near its edge; inside it,
+                // nothing else shows.
+                let edge = (rho - d.inner_radius) * inv_s;
+                let o = &mut rad[v * self.w + u];
+                if edge < -1.2 {
+                    *o += (disc - *o) * alpha as f32;
+                    continue;
+                }
                 // Canopy: radial shading toward the disc, side light.
-                let radial_f = (rho - d.inner_radius) / (d.canopy_radius - d.inner_radius);
+                let radial_f = (rho - d.inner_radius) * inv_canopy_span;
                 let mut val =
                     d.canopy * (0.82 + 0.18 * clamp01(radial_f)) * (1.0 + 0.06 * x / rho.max(1e-9));
                 // Coverage falls with the distance to a strut, so the nearest
-                // strut (on its own side of the centre) decides: one division
-                // per pixel instead of one per strut.
+                // strut (on its own side of the centre) decides.
                 let mut perp_min = f64::INFINITY;
                 for &(c, sn) in &strut_dirs {
                     if x * c + y * sn > 0.0 {
                         perp_min = perp_min.min((-x * sn + y * c).abs());
                     }
                 }
-                let strut_cov = clamp01(0.5 - (perp_min - half_strut) / s);
+                let strut_cov = clamp01(0.5 - (perp_min - half_strut) * inv_s);
                 val += (d.strut - val) * strut_cov;
-                let rim_cov = clamp01(0.5 + (rho - (d.canopy_radius - d.rim_width)) / s);
+                let rim_cov = clamp01(0.5 + (rho - rim_inner) * inv_s);
                 val += (d.rim - val) * rim_cov;
-                // Inner circle: supersampled 4x4 near its edge.
-                let edge = (rho - d.inner_radius) / s;
-                let disc_cov = if edge.abs() < 1.2 {
-                    let mut n = 0;
+                let disc_cov = if edge < 1.2 {
+                    let mut inside = 0;
                     for j in 0..4 {
                         for i in 0..4 {
                             let (du, dv) = ((i as f64 - 1.5) / 4.0, (j as f64 - 1.5) / 4.0);
                             let r2 = ray + su * du + sv * dv;
-                            let t2 = nc / d.normal.dot(&r2);
-                            let q2 = r2 * t2 - d.centre;
-                            if q2.norm_squared() < d.inner_radius * d.inner_radius {
-                                n += 1;
+                            let t2 = nc / n.dot(&r2);
+                            if (r2 * t2 - d.centre).norm_squared() < r_in2 {
+                                inside += 1;
                             }
                         }
                     }
-                    n as f64 / 16.0
-                } else if edge < 0.0 {
-                    1.0
+                    inside as f32 / 16.0
                 } else {
                     0.0
                 };
                 let val = self.haze(val) as f32;
-                let val = val + (disc - val) * disc_cov as f32;
-                let o = &mut rad[v * self.w + u];
+                let val = val + (disc - val) * disc_cov;
                 *o += (val - *o) * alpha as f32;
             }
         }
