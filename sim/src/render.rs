@@ -359,6 +359,30 @@ fn inv_normal(p: f64) -> f64 {
     }
 }
 
+/// Index of the strut direction (cos, sin) nearest in angle to the
+/// in-plane point (x, y), i.e. with the largest x cos + y sin. Around the
+/// circle of evenly spaced struts that is unimodal, so climbing from
+/// `start` (the neighbouring pixel's strut) takes a step or two instead of
+/// a look at every strut. `dirs` must not be empty.
+#[inline]
+fn nearest_strut(dirs: &[(f64, f64)], x: f64, y: f64, start: usize) -> usize {
+    let n = dirs.len();
+    let along = |k: usize| x * dirs[k].0 + y * dirs[k].1;
+    let (mut k, mut best) = (start, along(start));
+    loop {
+        let next = if k + 1 == n { 0 } else { k + 1 };
+        let prev = if k == 0 { n - 1 } else { k - 1 };
+        let (a_next, a_prev) = (along(next), along(prev));
+        if a_next > best {
+            (k, best) = (next, a_next);
+        } else if a_prev > best {
+            (k, best) = (prev, a_prev);
+        } else {
+            return k;
+        }
+    }
+}
+
 /// 2^23: adding it to a float in [0, 2^23) leaves the float's integer
 /// part (rounded to nearest) in the low mantissa bits.
 const F32_INT_MAGIC: f32 = 8_388_608.0;
@@ -484,8 +508,11 @@ impl Renderer {
             let lo = 1.0 - l.cloud_cover - 0.08;
             let x = clamp01((c - lo) / 0.22);
             let cov = x * x * (3.0 - 2.0 * x);
-            let shade = 0.88 + 0.12 * fbm(az * 17.0, el * 30.0, l.cloud_seed ^ 0x55) as f64;
-            value = base + (l.cloud_radiance * shade - base) * cov;
+            // Clear sky needs no cloud shading (half the noise work).
+            if cov > 0.0 {
+                let shade = 0.88 + 0.12 * fbm(az * 17.0, el * 30.0, l.cloud_seed ^ 0x55) as f64;
+                value = base + (l.cloud_radiance * shade - base) * cov;
+            }
         }
         let mut veil = 0.0;
         if l.glare > 0.0 {
@@ -617,6 +644,8 @@ impl Renderer {
         let inv_canopy_span = 1.0 / (d.canopy_radius - d.inner_radius);
         let r_in2 = d.inner_radius * d.inner_radius;
         for v in b.1..=b.3 {
+            // The nearest strut of the previous pixel in the row.
+            let mut strut = 0;
             for u in b.0..=b.2 {
                 let ray = self.ray(u, v);
                 let nd = n.x * ray.x + n.y * ray.y + n.z;
@@ -668,9 +697,11 @@ impl Renderer {
                 // Coverage falls with the distance to a strut, so the nearest
                 // strut (on its own side of the centre) decides.
                 let mut perp_min = f64::INFINITY;
-                for &(c, sn) in &strut_dirs {
+                if !strut_dirs.is_empty() {
+                    strut = nearest_strut(&strut_dirs, x, y, strut);
+                    let (c, sn) = strut_dirs[strut];
                     if x * c + y * sn > 0.0 {
-                        perp_min = perp_min.min((-x * sn + y * c).abs());
+                        perp_min = (-x * sn + y * c).abs();
                     }
                 }
                 let strut_cov = clamp01(0.5 - (perp_min - half_strut) * inv_s);
