@@ -895,11 +895,46 @@ impl Renderer {
                 (m[0] * f, m[1] * f)
             })
             .collect();
+        // Away from the box's border every pixel's taps have the same
+        // whole-pixel offsets and bilinear weights: precomputed once.
+        let whole: Vec<(isize, isize, f32, f32)> = offs
+            .iter()
+            .map(|&(dx, dy)| {
+                let (ix, iy) = (dx.floor(), dy.floor());
+                (ix as isize, iy as isize, (dx - ix) as f32, (dy - iy) as f32)
+            })
+            .collect();
+        let reach = |pick: fn(&(isize, isize, f32, f32)) -> isize| {
+            let lo = whole.iter().map(pick).min().unwrap_or(0);
+            let hi = whole.iter().map(pick).max().unwrap_or(0);
+            (lo, hi)
+        };
+        let ((dx_lo, dx_hi), (dy_lo, dy_hi)) = (reach(|t| t.0), reach(|t| t.1));
+        // Pixels x in x_inner with x + dx_lo >= 0 and x + dx_hi + 1 <= bw - 1.
+        let x_inner = (-dx_lo).max(0)..=(bw as isize - 2 - dx_hi);
+        let y_inner = (-dy_lo).max(0)..=(bh as isize - 2 - dy_hi);
+        let taps_px: Vec<(isize, f32, f32)> = whole
+            .iter()
+            .map(|&(ix, iy, fx, fy)| (iy * bw as isize + ix, fx, fy))
+            .collect();
         for y in 0..bh {
+            let row_inner = y_inner.contains(&(y as isize));
             for x in 0..bw {
                 let mut acc = 0.0;
-                for &(dx, dy) in &offs {
-                    acc += sample(x as f64 + dx, y as f64 + dy);
+                if row_inner && x_inner.contains(&(x as isize)) {
+                    let here = (y * bw + x) as isize;
+                    for &(offset, fx, fy) in &taps_px {
+                        let i = (here + offset) as usize;
+                        let (p00, p10) = (src[i], src[i + 1]);
+                        let (p01, p11) = (src[i + bw], src[i + bw + 1]);
+                        let top = p00 + (p10 - p00) * fx;
+                        let bot = p01 + (p11 - p01) * fx;
+                        acc += top + (bot - top) * fy;
+                    }
+                } else {
+                    for &(dx, dy) in &offs {
+                        acc += sample(x as f64 + dx, y as f64 + dy);
+                    }
                 }
                 rad[(v0 + y) * self.w + u0 + x] = acc / taps as f32;
             }
