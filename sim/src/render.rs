@@ -132,11 +132,12 @@ impl TubeAxis {
     }
 }
 
-/// One pixel a tube covers: its index in the frame, the depth of the
+/// One pixel a tube covers: its column and row, the depth of the
 /// tube's axis along the pixel's ray, its coverage and radiance.
 #[derive(Clone, Copy, Debug)]
 struct TubeFragment {
-    index: u32,
+    u: u32,
+    v: u32,
     depth: f64,
     coverage: f32,
     radiance: f32,
@@ -575,7 +576,7 @@ impl Renderer {
                 self.blur(&mut rad, b, m);
             }
         }
-        self.composite_tube(&mut rad, &probe_layer, Some(&scene.drogue));
+        self.composite_tube(&mut rad, &probe_layer, bbox.map(|b| (&scene.drogue, b)));
         // 3. Sensor: vignette, glare veil, gain, noise, 8 bits.
         let img = self.sensor(&mut rad, &dirty, &sky_grid, &veil_grid, scene.noise_seed);
         self.rad = rad;
@@ -828,7 +829,8 @@ impl Renderer {
                 let shade = base * (0.7 + 0.45 * (1.0 - k * k).sqrt())
                     + 0.25 * base * (-((k - 0.45) / 0.12).powi(2)).exp();
                 layer.fragments.push(TubeFragment {
-                    index: (v * self.w + u) as u32,
+                    u: u as u32,
+                    v: v as u32,
                     depth: t,
                     coverage: cov as f32,
                     radiance: self.haze(shade) as f32,
@@ -843,11 +845,20 @@ impl Renderer {
     /// Blends a tube's fragments into the frame; where `in_front_of` (the
     /// drogue) is nearer than the tube, it hides the tube.
     #[inline(never)]
-    fn composite_tube(&self, rad: &mut [f32], layer: &TubeLayer, in_front_of: Option<&DrogueView>) {
+    fn composite_tube(
+        &self,
+        rad: &mut [f32],
+        layer: &TubeLayer,
+        in_front_of: Option<(&DrogueView, (usize, usize, usize, usize))>,
+    ) {
         for f in &layer.fragments {
-            let index = f.index as usize;
-            if let Some(d) = in_front_of {
-                let ray = self.ray(index % self.w, index / self.w);
+            let (u, v) = (f.u as usize, f.v as usize);
+            // Only inside its box can the drogue be in front.
+            if let Some((d, b)) = in_front_of
+                && (b.0..=b.2).contains(&u)
+                && (b.1..=b.3).contains(&v)
+            {
+                let ray = self.ray(u, v);
                 let nd = d.normal.dot(&ray);
                 if nd < 0.0 {
                     let tp = d.normal.dot(&d.centre) / nd;
@@ -856,7 +867,7 @@ impl Renderer {
                     }
                 }
             }
-            let o = &mut rad[index];
+            let o = &mut rad[v * self.w + u];
             *o += (f.radiance - *o) * f.coverage;
         }
     }
