@@ -19,6 +19,9 @@ use image::GrayImage;
 /// Sky grid spacing, pixels.
 const GRID: usize = 16;
 
+/// Pixel box (u0, v0, u1, v1), inclusive.
+type PixelBox = (usize, usize, usize, usize);
+
 /// A tube (hose, probe): axis segment a -> b in the camera frame, radii.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Tube {
@@ -586,7 +589,7 @@ impl Renderer {
     }
 
     /// Pixel bounding box (u0, v0, u1, v1), inclusive, of the canopy.
-    fn drogue_bbox(&self, d: &DrogueView) -> Option<(usize, usize, usize, usize)> {
+    fn drogue_bbox(&self, d: &DrogueView) -> Option<PixelBox> {
         let (mut u0, mut v0, mut u1, mut v1) = (f64::MAX, f64::MAX, f64::MIN, f64::MIN);
         let r = d.canopy_radius * 1.02;
         for k in 0..72 {
@@ -623,7 +626,7 @@ impl Renderer {
     /// drogue plane at in-plane (x, y); edges are anti-aliased by their
     /// distance in pixels (metres over the pixel footprint |grad rho|).
     #[inline(never)]
-    fn draw_drogue(&self, rad: &mut [f32], d: &DrogueView, b: (usize, usize, usize, usize)) {
+    fn draw_drogue(&self, rad: &mut [f32], d: &DrogueView, b: PixelBox) {
         let nc = d.normal.dot(&d.centre);
         if nc >= 0.0 {
             return;
@@ -849,7 +852,7 @@ impl Renderer {
         &self,
         rad: &mut [f32],
         layer: &TubeLayer,
-        in_front_of: Option<(&DrogueView, (usize, usize, usize, usize))>,
+        in_front_of: Option<(&DrogueView, PixelBox)>,
     ) {
         for f in &layer.fragments {
             let (u, v) = (f.u as usize, f.v as usize);
@@ -874,7 +877,7 @@ impl Renderer {
 
     /// Box blur along `m` (pixels, centred) within the box.
     #[inline(never)]
-    fn blur(&mut self, rad: &mut [f32], b: (usize, usize, usize, usize), m: [f64; 2]) {
+    fn blur(&mut self, rad: &mut [f32], b: PixelBox, m: [f64; 2]) {
         let len = (m[0] * m[0] + m[1] * m[1]).sqrt();
         let pad = (len / 2.0).ceil() as usize + 2;
         let (u0, v0) = (b.0.saturating_sub(pad), b.1.saturating_sub(pad));
@@ -1032,3 +1035,6 @@ impl Renderer {
             .unwrap_or_else(|| GrayImage::new(w as u32, h as u32))
     }
 }
+
+#[cfg(test)]
+mod tests;
