@@ -11,6 +11,15 @@
 //! interpolated. Motion blur is a box filter along the drogue's image motion
 //! during the exposure, applied before the probe (which moves with the
 //! camera). Then vignetting, exposure gain, shot + read noise, 8-bit.
+//!
+//! Speed (a 1280x960 frame in a few ms on one core, `benches/render.rs`):
+//! tubes become fragments (pixel, depth, coverage, radiance) blended in
+//! afterwards, and the probe's are kept between frames, since it is fixed
+//! to the receiver; per drogue pixel the nearest strut is found by climbing
+//! from the neighbouring pixel's; the blur's taps share their weights; the
+//! sensor loop is branch-free so it vectorises. Each of these is checked
+//! against the straightforward every-pixel path in `render/tests.rs`. The
+//! per-frame stages are `#[inline(never)]` so profiles name them.
 
 use crate::camera::SimCamera;
 use crate::geometry::{M3, V3};
