@@ -12,7 +12,8 @@
 //! during the exposure, applied before the probe (which moves with the
 //! camera). Then vignetting, exposure gain, shot + read noise, 8-bit.
 //!
-//! Speed (a 1280x960 frame in a few ms on one core, `benches/render.rs`):
+//! Speed (a 1280x960 frame in 4-7 ms of one core's time, the first of a
+//! run about 10 ms; `benches/render.rs`):
 //! tubes become fragments (pixel, depth, coverage, radiance) blended in
 //! afterwards, and the probe's are kept between frames, since it is fixed
 //! to the receiver; per drogue pixel the nearest strut is found by climbing
