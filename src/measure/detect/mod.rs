@@ -318,9 +318,11 @@ impl Detector {
             let r = polar_radius(seed.a_px, seed.b_px, seed.theta, phi).min(longest);
             let dir = [phi.cos(), phi.sin()];
             let s_max = seed.reach * r + 4.0;
-            // About a pixel of accuracy is enough here: coarser steps on
-            // large seeds.
-            let step = (r / 40.0).clamp(0.5, 2.0);
+            // About a pixel of accuracy on a small seed, a percent of its
+            // size on a large one, is enough here (the narrow passes
+            // refine it): a fixed number of steps per radius, so that a
+            // large dark region (cloud, shadow) costs no more than a disc.
+            let step = (r / 40.0).max(0.5);
             rim::profile(image, c, dir, 1.0, s_max, step, &mut self.profile);
             if let Some(e) =
                 rim::strongest_rise(&self.profile, 1.0, step, self.cfg.min_contrast_gray as f32)
