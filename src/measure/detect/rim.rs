@@ -64,15 +64,19 @@ pub fn profile(
     if w >= 2 && h >= 2 && within(first) && within(last) {
         // The segment lies inside the image (it is convex): no checks per
         // sample, same arithmetic as `sample`.
+        // Signed integer conversions: cheaper than unsigned ones on x86-64
+        // and exact here (0 <= u, v < 2^31; truncation is floor).
         let raw = img.as_raw();
+        let (x_max, y_max) = (w as i64 - 2, h as i64 - 2);
         out.extend((0..n).map(|k| {
             let (u, v) = at(k);
-            let x0 = (u as usize).min(w - 2);
-            let y0 = (v as usize).min(h - 2);
+            let x0 = (u as i64).min(x_max);
+            let y0 = (v as i64).min(y_max);
             let (fx, fy) = ((u - x0 as f64) as f32, (v - y0 as f64) as f32);
-            let i = y0 * w + x0;
-            let (p00, p10) = (f32::from(raw[i]), f32::from(raw[i + 1]));
-            let (p01, p11) = (f32::from(raw[i + w]), f32::from(raw[i + w + 1]));
+            let i = y0 as usize * w + x0 as usize;
+            let (top_row, bottom_row) = (&raw[i..i + 2], &raw[i + w..i + w + 2]);
+            let (p00, p10) = (f32::from(top_row[0]), f32::from(top_row[1]));
+            let (p01, p11) = (f32::from(bottom_row[0]), f32::from(bottom_row[1]));
             let top = p00 + fx * (p10 - p00);
             let bottom = p01 + fx * (p11 - p01);
             top + fy * (bottom - top)
