@@ -141,10 +141,13 @@ fn percentile(pixels: &[u8], fraction: f64) -> u8 {
 pub struct BlobFinder {
     /// The label image of each pass (highest threshold first).
     labels: Vec<Vec<u32>>,
-    runs: Vec<Run>,
+    /// The dark runs of each pass, in raster order, with their labels.
+    runs: Vec<Vec<Run>>,
     moments: Vec<RegionMoments>,
     /// Chamfer distances over a blob's box, with a ring of zeros.
     distance: Vec<u32>,
+    /// A blob's runs: (padded index of the first pixel, length, y, x0).
+    blob_runs: Vec<(usize, usize, usize, usize)>,
     /// Size of each region of the highest threshold.
     region_areas: Vec<usize>,
 }
@@ -247,6 +250,7 @@ impl BlobFinder {
         let mut order: Vec<usize> = (0..fractions.len()).collect();
         order.sort_by(|&i, &j| fractions[j].total_cmp(&fractions[i]));
         self.labels.resize_with(order.len(), Vec::new);
+        self.runs.resize_with(order.len(), Vec::new);
         for (pass, &level) in order.iter().enumerate() {
             let threshold = lo + fractions[level] * (hi - lo);
             let first = out.len();
@@ -282,8 +286,8 @@ impl BlobFinder {
         let (w, h) = (img.width, img.height);
         // Integer levels: p <= threshold exactly when p <= floor(threshold).
         let level = threshold.floor().clamp(-1.0, 255.0) as i32;
-        self.find_runs(img, level);
-        let runs = &mut self.runs;
+        self.find_runs(img, level, pass);
+        let runs = &mut self.runs[pass];
 
         // Components numbered in raster order of their first run, which
         // holds their first pixel.
@@ -362,9 +366,9 @@ impl BlobFinder {
 
     /// The runs of dark pixels (<= `level`) of each row, in raster order,
     /// each joined (union-find) to the 8-connected runs of the row above.
-    fn find_runs(&mut self, img: &Decimated, level: i32) {
+    fn find_runs(&mut self, img: &Decimated, level: i32, pass: usize) {
         let w = img.width;
-        let runs = &mut self.runs;
+        let runs = &mut self.runs[pass];
         runs.clear();
         let mut above = 0..0;
         for (y, row) in img.pixels.chunks_exact(w).enumerate() {
@@ -437,20 +441,24 @@ impl BlobFinder {
         d.clear();
         d.resize(pw * ph, 0);
         let inf = u32::MAX / 2;
-        for y in ry0..=ry1 {
-            let row = &labels[y * w + rx0..=y * w + rx1];
-            let start = pad(rx0, y);
-            for (dv, &l) in d[start..start + row.len()].iter_mut().zip(row) {
-                if l == label {
-                    *dv = inf;
-                }
-            }
+        // Only the region's own runs are visited: the rest of its box
+        // stays zero (outside the region), as the passes leave it.
+        let Some(all_runs) = self.runs.get(blob.pass) else {
+            return;
+        };
+        let runs = &mut self.blob_runs;
+        runs.clear();
+        runs.extend(all_runs.iter().filter(|r| r.label == label).map(|r| {
+            let (y, x0, x1) = (r.y as usize, r.x0 as usize, r.x1 as usize);
+            (pad(x0, y), x1 - x0, y, x0)
+        }));
+        for &(start, len, _, _) in runs.iter() {
+            d[start..start + len].fill(inf);
         }
-        for py in 1..ph - 1 {
-            for i in py * pw + 1..py * pw + pw - 1 {
-                if d[i] == 0 {
-                    continue;
-                }
+        // Forward pass in raster order (runs are in raster order), then
+        // backward.
+        for &(start, len, _, _) in runs.iter() {
+            for i in start..start + len {
                 d[i] = d[i]
                     .min(d[i - 1] + 3)
                     .min(d[i - pw] + 3)
@@ -458,11 +466,8 @@ impl BlobFinder {
                     .min(d[i - pw + 1] + 4);
             }
         }
-        for py in (1..ph - 1).rev() {
-            for i in (py * pw + 1..py * pw + pw - 1).rev() {
-                if d[i] == 0 {
-                    continue;
-                }
+        for &(start, len, _, _) in runs.iter().rev() {
+            for i in (start..start + len).rev() {
                 d[i] = d[i]
                     .min(d[i + 1] + 3)
                     .min(d[i + pw] + 3)
@@ -472,24 +477,32 @@ impl BlobFinder {
         }
         // The deepest pixel (the first in raster order on ties).
         let mut deepest = (0u32, blob.start);
-        for y in ry0..=ry1 {
-            for x in rx0..=rx1 {
-                let di = d[pad(x, y)];
-                if di > deepest.0 && labels[y * w + x] == label {
-                    deepest = (di, y * w + x);
+        for &(start, len, y, x0) in runs.iter() {
+            for k in 0..len {
+                let di = d[start + k];
+                if di > deepest.0 {
+                    deepest = (di, y * w + x0 + k);
                 }
             }
         }
         // Ridge points (a local maximum of the distance across the region in
         // at least one direction) and the light share of a ring just
-        // outside their inscribed circle.
+        // outside their inscribed circle. Not on the image's outermost
+        // rows and columns.
         let mut ringed = (0.0f64, 0u32, 0usize);
-        for y in ry0.max(1)..=ry1.min(h.saturating_sub(2)) {
-            for x in rx0.max(1)..=rx1.min(w.saturating_sub(2)) {
+        for &(start, len, y, x0) in runs.iter() {
+            if y == 0 || y + 1 >= h {
+                continue;
+            }
+            for k in 0..len {
+                let x = x0 + k;
+                if x == 0 || x + 1 >= w {
+                    continue;
+                }
                 let i = y * w + x;
-                let pi = pad(x, y);
+                let pi = start + k;
                 let di = d[pi];
-                if di < 6 || labels[i] != label {
+                if di < 6 {
                     continue;
                 }
                 // Only the thick parts: the disc is among its region's
