@@ -249,11 +249,6 @@ impl Writer {
         let mut buf = std::mem::take(&mut self.buf);
         let ann = topics::annotations(m, &self.camera);
         self.write_proto(topics::ANNOTATIONS, seq, t, &ann, &mut buf);
-        if let Some(d) = &m.detection {
-            self.write_proto(topics::POSE, seq, t, &topics::pose(d, t), &mut buf);
-        }
-        let tf = topics::transforms(m, &item.mount);
-        self.write_proto(topics::TF, seq, t, &tf, &mut buf);
         self.buf = buf;
         let record = ReadyRecord {
             seq,
@@ -270,6 +265,13 @@ impl Writer {
             (false, _) => vec![record],
         };
         self.write_detections(ready);
+        let mut buf = std::mem::take(&mut self.buf);
+        if let Some(d) = &m.detection {
+            self.write_proto(topics::POSE, seq, t, &topics::pose(d, t), &mut buf);
+        }
+        let tf = topics::transforms(m, &item.mount);
+        self.write_proto(topics::TF, seq, t, &tf, &mut buf);
+        self.buf = buf;
     }
 
     /// `/drogue/detection` records, with `latency_ns.logged` stamped now.
