@@ -185,7 +185,7 @@ mod tests {
                 }
             }
             let (i, j, d) = best;
-            if !(d <= threshold * threshold) {
+            if d.is_infinite() || d > threshold * threshold {
                 break;
             }
             let b = classes[j].take().unwrap();
