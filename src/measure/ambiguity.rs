@@ -42,23 +42,18 @@ const MIN_SHARE_IN_IMAGE: f64 = 0.5;
 /// the two predictions are within the search band of each other anyway.
 const MIN_RIM_SIZE_PX: f64 = 4.0;
 
-/// Bilinear grey value at (u, v) (pixel centres at integers), or `None`
-/// outside the image.
-fn grey_at(image: &GrayImage, u: f64, v: f64) -> Option<f64> {
-    let (w, h) = image.dimensions();
-    if !(u >= 0.0 && v >= 0.0 && u <= (w as f64 - 1.0) && v <= (h as f64 - 1.0)) {
-        return None;
-    }
-    let (u0, v0) = (u.floor(), v.floor());
-    let (fu, fv) = (u - u0, v - v0);
-    let (x0, y0) = (u0 as usize, v0 as usize);
-    let (w, h) = (w as usize, h as usize);
+/// Bilinear grey value at (u, v) (pixel centres at integers), which must be
+/// inside the image: `0 <= u <= width - 1`, `0 <= v <= height - 1`.
+fn grey_inside(raw: &[u8], w: usize, h: usize, u: f64, v: f64) -> f64 {
+    // u, v >= 0, so truncation is the floor (and, unlike f64::floor on the
+    // baseline x86-64 target, not a library call).
+    let (x0, y0) = (u as usize, v as usize);
+    let (fu, fv) = (u - x0 as f64, v - y0 as f64);
     let (x1, y1) = ((x0 + 1).min(w - 1), (y0 + 1).min(h - 1));
-    let raw = image.as_raw();
     let g = |x: usize, y: usize| f64::from(raw[y * w + x]);
     let top = g(x0, y0) * (1.0 - fu) + g(x1, y0) * fu;
     let bottom = g(x0, y1) * (1.0 - fu) + g(x1, y1) * fu;
-    Some(top * (1.0 - fv) + bottom * fv)
+    top * (1.0 - fv) + bottom * fv
 }
 
 /// Offsets searched across the curve: -SEARCH_PX..=SEARCH_PX.
@@ -75,10 +70,24 @@ const STEPS_PER_PX: usize = (1.0 / SEARCH_STEP_PX) as usize;
 /// if the search leaves the image.
 fn outward_edge_offset(image: &GrayImage, p: [f64; 2], out: [f64; 2]) -> Option<Option<f64>> {
     let start = -SEARCH_PX - 1.0;
+    let at = |j: usize| {
+        let o = start + j as f64 * SEARCH_STEP_PX;
+        (p[0] + out[0] * o, p[1] + out[1] * o)
+    };
+    // The samples lie on a segment and each coordinate is monotone along it
+    // (also in floating point), so all are inside the image if both ends are.
+    let (w, h) = image.dimensions();
+    let inside = |(u, v): (f64, f64)| {
+        u >= 0.0 && v >= 0.0 && u <= f64::from(w) - 1.0 && v <= f64::from(h) - 1.0
+    };
+    if !(inside(at(0)) && inside(at(PROFILE_LEN - 1))) {
+        return None;
+    }
+    let (raw, w, h) = (image.as_raw().as_slice(), w as usize, h as usize);
     let mut grey = [0.0; PROFILE_LEN];
     for (j, g) in grey.iter_mut().enumerate() {
-        let o = start + j as f64 * SEARCH_STEP_PX;
-        *g = grey_at(image, p[0] + out[0] * o, p[1] + out[1] * o)?;
+        let (u, v) = at(j);
+        *g = grey_inside(raw, w, h, u, v);
     }
     // Central difference over 2 px at each searched offset.
     let mut gradient = [0.0; SEARCH_STEPS];

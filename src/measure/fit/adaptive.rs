@@ -41,12 +41,20 @@ fn from_vector(v: &[f64; 5]) -> Option<Ellipse> {
     (b > 0.0 && a.is_finite()).then(|| Ellipse::new(v[0], v[1], a, b, 0.5 * v[4].atan2(v[3])))
 }
 
-/// Marks the points within `band` (first-order distance) of `e`.
-fn select(pts: &[[f64; 2]], e: &Ellipse, band: f64, out: &mut [bool]) -> usize {
+/// First-order (Sampson) distance of every point to `e`, into `out`.
+/// Computed once per model: the inlier selection and the robust sigma both
+/// read it.
+fn residuals(pts: &[[f64; 2]], e: &Ellipse, out: &mut Vec<f64>) {
     let conic = e.to_conic();
+    out.clear();
+    out.extend(pts.iter().map(|p| conic.sampson_distance(p[0], p[1])));
+}
+
+/// Marks the points whose residual is within `band`.
+fn select(residual: &[f64], band: f64, out: &mut [bool]) -> usize {
     let mut count = 0;
-    for (p, k) in pts.iter().zip(out.iter_mut()) {
-        *k = conic.sampson_distance(p[0], p[1]) < band;
+    for (r, k) in residual.iter().zip(out.iter_mut()) {
+        *k = *r < band;
         count += usize::from(*k);
     }
     count
@@ -54,14 +62,14 @@ fn select(pts: &[[f64; 2]], e: &Ellipse, band: f64, out: &mut [bool]) -> usize {
 
 /// Robust sigma (1.4826 * median absolute first-order residual) of the
 /// selected points.
-fn robust_sigma(pts: &[[f64; 2]], e: &Ellipse, keep: &[bool], scratch: &mut Vec<f64>) -> f64 {
-    let conic = e.to_conic();
+fn robust_sigma(residual: &[f64], keep: &[bool], scratch: &mut Vec<f64>) -> f64 {
     scratch.clear();
     scratch.extend(
-        pts.iter()
+        residual
+            .iter()
             .zip(keep)
             .filter(|(_, k)| **k)
-            .map(|(p, _)| conic.sampson_distance(p[0], p[1])),
+            .map(|(r, _)| *r),
     );
     if scratch.is_empty() {
         return f64::INFINITY;
@@ -108,21 +116,24 @@ fn local_optimise(
     cfg: &FitConfig,
     min_band: f64,
     keep: &mut [bool],
-    scratch: &mut Vec<f64>,
+    scratch: &mut Scratch,
 ) -> Option<Candidate> {
     let mut c = Candidate {
         model: *start,
         band,
         sigma: f64::INFINITY,
     };
+    let Scratch { residual, sorted } = scratch;
+    residuals(xy, &c.model, residual);
     for _ in 0..cfg.adaptive_refine_rounds {
-        if select(xy, &c.model, c.band, keep) < 5 {
+        if select(residual, c.band, keep) < 5 {
             break;
         }
         if let Some(e) = taubin::fit_ellipse(xy, Some(keep)).filter(plausible) {
             c.model = e;
+            residuals(xy, &c.model, residual);
         }
-        c.sigma = robust_sigma(xy, &c.model, keep, scratch);
+        c.sigma = robust_sigma(residual, keep, sorted);
         // Shrink to k sigmas, but by at least 30 % a round: a rough model
         // has a large sigma and would otherwise never tighten.
         let next = (cfg.adaptive_inlier_sigmas * c.sigma)
@@ -135,6 +146,14 @@ fn local_optimise(
         }
     }
     c.sigma.is_finite().then_some(c)
+}
+
+/// Reused buffers: residuals of every point, and the selected ones for the
+/// median.
+#[derive(Default)]
+struct Scratch {
+    residual: Vec<f64>,
+    sorted: Vec<f64>,
 }
 
 /// Points used to score class centres and to optimise candidates locally
@@ -165,9 +184,7 @@ pub(crate) fn fit(
             .map(to_vector)
             .collect();
     let tolerance = cfg.adaptive_cluster_relative + cfg.adaptive_cluster_px / px;
-    let distance_sq =
-        |v: &[f64; 5], w: &[f64; 5]| v.iter().zip(w).map(|(x, y)| (x - y) * (x - y)).sum::<f64>();
-    let clusters = agglomerate(&set, distance_sq, tolerance);
+    let clusters = agglomerate(&set, tolerance);
 
     // 3. Every class centre (an average of consistent subset fits, eq. 10)
     // is scored by its support within a wide band on a subsample; the best
@@ -188,7 +205,10 @@ pub(crate) fn fit(
     scored.sort_by(|x, y| y.0.cmp(&x.0).then(x.1.cmp(&y.1)));
     let lo_pts = subsample(xy, MAX_LO_POINTS);
     let mut keep = vec![false; xy.len()];
-    let mut scratch = Vec::with_capacity(xy.len());
+    let mut scratch = Scratch {
+        residual: Vec::with_capacity(xy.len()),
+        sorted: Vec::with_capacity(xy.len()),
+    };
     let candidates: Vec<Candidate> = scored
         .iter()
         .take(cfg.adaptive_clusters_scored)
@@ -221,8 +241,10 @@ pub(crate) fn fit(
     // 4. The winner on all points: Taubin rounds until the inlier set is
     // stable (cheap), then the geometric refit of that set; if its band
     // then selects other points, one more geometric refit.
+    let Scratch { residual, sorted } = &mut scratch;
     let (mut model, mut band) = (winner.model, winner.band);
-    let mut count = select(xy, &model, band, &mut keep);
+    residuals(xy, &model, residual);
+    let mut count = select(residual, band, &mut keep);
     let mut next = vec![false; xy.len()];
     for _ in 0..3 {
         if count < 5 {
@@ -230,10 +252,10 @@ pub(crate) fn fit(
         }
         if let Some(e) = taubin::fit_ellipse(xy, Some(&keep)).filter(plausible) {
             model = e;
+            residuals(xy, &model, residual);
         }
-        band = (cfg.adaptive_inlier_sigmas * robust_sigma(xy, &model, &keep, &mut scratch))
-            .max(min_band);
-        count = select(xy, &model, band, &mut next);
+        band = (cfg.adaptive_inlier_sigmas * robust_sigma(residual, &keep, sorted)).max(min_band);
+        count = select(residual, band, &mut next);
         let stable = next == keep;
         std::mem::swap(&mut keep, &mut next);
         if stable {
@@ -256,9 +278,10 @@ pub(crate) fn fit(
         }
         model = refined;
         used = Some(keep.clone());
-        let sigma = robust_sigma(xy, &model, &keep, &mut scratch);
+        residuals(xy, &model, residual);
+        let sigma = robust_sigma(residual, &keep, sorted);
         band = (cfg.adaptive_inlier_sigmas * sigma).max(min_band);
-        count = select(xy, &model, band, &mut next);
+        count = select(residual, band, &mut next);
         if next == keep {
             break;
         }

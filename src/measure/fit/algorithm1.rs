@@ -17,11 +17,6 @@ use crate::measure::ellipse::Ellipse;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
-/// Eq. 8, squared: Euclidean distance of (xc, yc, a, b, theta).
-fn eq8_sq(v: &[f64; 5], w: &[f64; 5]) -> f64 {
-    v.iter().zip(w).map(|(x, y)| (x - y) * (x - y)).sum::<f64>()
-}
-
 /// The ellipses of `subsets` random subsets of `size` points (normalised
 /// coordinates); subsets whose fit is not an ellipse are discarded (sec. 2.1).
 pub(crate) fn subset_ellipses(
@@ -62,8 +57,9 @@ pub(crate) fn fit(
         [p.cx, p.cy, p.a, p.b, p.theta]
     })
     .collect();
-    // Lines 6-17: cluster; M* is the centre of the biggest class.
-    let clusters = agglomerate(&set, eq8_sq, cfg.algorithm1_cluster_threshold);
+    // Lines 6-17: cluster with eq. 8 (the Euclidean distance of
+    // (xc, yc, a, b, theta)); M* is the centre of the biggest class.
+    let clusters = agglomerate(&set, cfg.algorithm1_cluster_threshold);
     let best = clusters.first().ok_or(FitError::NoEllipse)?;
     let [cx, cy, a, b, theta] = best.centre;
     let m_star = pts.px_to_normalised(&Ellipse::new(cx, cy, a, b, theta));

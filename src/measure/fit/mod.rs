@@ -168,7 +168,7 @@ impl FitConfig {
                 return Err(format!("fit.{key} must be >= 1"));
             }
         }
-        // The clustering is O(N^2) in memory and time: keep N sane.
+        // The clustering is O(N^2) in time: keep N sane.
         for (key, v) in [
             ("algorithm1_subsets", self.algorithm1_subsets),
             ("adaptive_subsets", self.adaptive_subsets),

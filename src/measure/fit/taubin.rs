@@ -7,7 +7,7 @@
 
 use super::least_squares::conic_to_ellipse;
 use crate::measure::ellipse::{Conic, Ellipse};
-use nalgebra::{Matrix5, Matrix6, Vector6};
+use nalgebra::Matrix5;
 
 /// Taubin's ellipse of the selected points (normalised coordinates), or
 /// `None` for degenerate data or a non-ellipse.
@@ -31,14 +31,35 @@ pub(crate) fn fit_ellipse(points: &[[f64; 2]], keep: Option<&[bool]>) -> Option<
     }
     let nf = n as f64;
     let (mx, my) = (mx / nf, my / nf);
-    // Moments of z = [x^2, xy, y^2, x, y, 1] over centred data.
-    let mut moments = Matrix6::<f64>::zeros();
+    // Moments of z = [x^2, xy, y^2, x, y, 1] over centred data: every entry
+    // of z z^T is a monomial x^i y^j with i + j <= 4, and there are only 15
+    // of them (S[i][j] = mean of x^i y^j), against 36 entries of z z^T.
+    let mut s = [[0.0f64; 5]; 5];
     for p in selected() {
         let (x, y) = (p[0] - mx, p[1] - my);
-        let z = Vector6::new(x * x, x * y, y * y, x, y, 1.0);
-        moments.ger(1.0 / nf, &z, &z, 1.0);
+        let (x2, y2, xy) = (x * x, y * y, x * y);
+        s[1][0] += x;
+        s[0][1] += y;
+        s[2][0] += x2;
+        s[1][1] += xy;
+        s[0][2] += y2;
+        s[3][0] += x2 * x;
+        s[2][1] += x2 * y;
+        s[1][2] += x * y2;
+        s[0][3] += y2 * y;
+        s[4][0] += x2 * x2;
+        s[3][1] += x2 * xy;
+        s[2][2] += x2 * y2;
+        s[1][3] += xy * y2;
+        s[0][4] += y2 * y2;
     }
-    let m = |i: usize, j: usize| moments[(i, j)];
+    for v in s.iter_mut().flatten() {
+        *v /= nf;
+    }
+    s[0][0] = 1.0;
+    // Exponents (of x, of y) of each entry of z.
+    const EXP: [(usize, usize); 6] = [(2, 0), (1, 1), (0, 2), (1, 0), (0, 1), (0, 0)];
+    let m = |i: usize, j: usize| s[EXP[i].0 + EXP[j].0][EXP[i].1 + EXP[j].1];
     // P: moments with F eliminated (F = -(A zxx + B zxy + C zyy)).
     let mut p = Matrix5::<f64>::zeros();
     for i in 0..5 {
