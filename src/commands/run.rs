@@ -443,6 +443,7 @@ fn spawn_measurement(
     log: LogHandle,
     counts: Arc<Mutex<RunSummary>>,
     meters: Arc<PipelineMeters>,
+    handed_to_link: Option<std::sync::mpsc::Sender<u64>>,
 ) -> (SyncSender<Arc<Frame>>, std::thread::JoinHandle<()>) {
     // Capacity 1: at most one frame waits; a newer one finding it full is
     // skipped for measurement (still logged), so latency never builds up.
@@ -452,6 +453,9 @@ fn spawn_measurement(
             let m = Arc::new(measurer.measure(&frame));
             let measured_ns = unix_now_ns();
             link.submit(Arc::clone(&m));
+            if let Some(done) = &handed_to_link {
+                let _ = done.send(frame.seq);
+            }
             let mut record =
                 serde_json::to_value(DetectionRecord::from_measurement(frame.seq.to_string(), &m))
                     .unwrap_or_default();
@@ -468,6 +472,21 @@ fn spawn_measurement(
         }
     });
     (tx, handle)
+}
+
+/// Longest a rendering source waits for the measurement of its last frame.
+const MAX_YIELD: Duration = Duration::from_millis(20);
+
+/// Waits (at most [`MAX_YIELD`]) until frame `seq` has been handed to the link.
+fn wait_until_handed_to_link(handed: &std::sync::mpsc::Receiver<u64>, seq: u64) {
+    let deadline = Instant::now() + MAX_YIELD;
+    while let Some(left) = deadline.checked_duration_since(Instant::now()) {
+        match handed.recv_timeout(left) {
+            Ok(done) if done >= seq => return,
+            Ok(_) => {}
+            Err(_) => return,
+        }
+    }
 }
 
 /// Runs the pipeline until the source ends, `--max-frames`, or a signal.
@@ -549,6 +568,12 @@ pub fn run(
     let meters = Arc::new(PipelineMeters::default());
     let stats_thread = StatsThread::spawn(Arc::clone(&meters), log.clone(), link.events());
     let counts = Arc::new(Mutex::new(RunSummary::default()));
+    // A source that renders its frames (the simulator) waits until the
+    // measurement has handed the frame to the link before making the next:
+    // on a small companion computer it would otherwise take a core from the
+    // measurement right when latency matters, which a camera never does.
+    let (handed_tx, handed_rx) = std::sync::mpsc::channel::<u64>();
+    let yield_to_measurement = frames_in.source().renders_frames();
     let (frame_tx, measure_thread) = spawn_measurement(
         measurer,
         mount,
@@ -556,6 +581,7 @@ pub fn run(
         log.clone(),
         Arc::clone(&counts),
         Arc::clone(&meters),
+        yield_to_measurement.then_some(handed_tx),
     );
 
     // Sources with a timeline (sim, log) are replayed at its pace unless
@@ -617,7 +643,9 @@ pub fn run(
             }
             continue;
         }
+        let seq = frame.seq;
         match frame_tx.try_send(frame) {
+            Ok(()) if yield_to_measurement => wait_until_handed_to_link(&handed_rx, seq),
             Ok(()) => {}
             Err(TrySendError::Full(f)) => {
                 skipped += 1;

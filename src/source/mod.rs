@@ -69,6 +69,13 @@ pub trait FrameSource: Send {
     fn recorded_timeline(&self) -> bool {
         false
     }
+    /// Whether making a frame costs this process real CPU (the simulator's
+    /// rendering). `run` then waits for a frame's measurement before asking
+    /// for the next one, so the source never competes with the pipeline for
+    /// a core, as a camera never would.
+    fn renders_frames(&self) -> bool {
+        false
+    }
     /// The next frame; `None` at the end of the source.
     fn next_frame(&mut self) -> Option<SourceItem>;
 }

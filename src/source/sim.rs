@@ -249,6 +249,9 @@ impl FrameSource for SimSource {
     fn recorded_timeline(&self) -> bool {
         true
     }
+    fn renders_frames(&self) -> bool {
+        true
+    }
     fn next_frame(&mut self) -> Option<SourceItem> {
         let start_ns = self.sim.start_time_ns();
         let (image, truth) = self.sim.next_frame()?;
