@@ -82,17 +82,13 @@ pub struct RunSummary {
     pub interrupted: bool,
 }
 
-fn open_source(spec: &SourceSpec) -> Result<Box<dyn FrameSource>, RunError> {
+fn open_source(spec: &SourceSpec, config: &Config) -> Result<Box<dyn FrameSource>, RunError> {
     let setup = |e: crate::source::SourceError| RunError::Setup(e.to_string());
     Ok(match spec {
         SourceSpec::Sim(name) => Box::new(SimSource::open(name).map_err(setup)?),
         SourceSpec::Dir(path) => Box::new(DirSource::open(path).map_err(setup)?),
         SourceSpec::Mcap(path) => Box::new(McapSource::open(path).map_err(setup)?),
-        SourceSpec::V4l(dev) => {
-            return Err(RunError::Setup(format!(
-                "source v4l:{dev}: this build has no V4L2 camera support"
-            )));
-        }
+        SourceSpec::V4l(dev) => crate::source::v4l::open(dev, &config.v4l).map_err(setup)?,
     })
 }
 
@@ -192,7 +188,7 @@ pub fn run(
     let spec: SourceSpec = spec_text
         .parse()
         .map_err(|e: crate::source::SourceError| RunError::Setup(e.to_string()))?;
-    let mut source = open_source(&spec)?;
+    let mut source = open_source(&spec, &config)?;
     let camera = choose_camera(source.as_ref(), args, &config)?;
     let mut config = config;
     if let Some(m) = source.mount() {

@@ -1,8 +1,10 @@
-//! Frame sources for `run`: the simulator, a folder of images, an MCAP log.
+//! Frame sources for `run`: the simulator, a folder of images, an MCAP log,
+//! a V4L2 camera.
 
 pub mod dir;
 pub mod mcap;
 pub mod sim;
+pub mod v4l;
 
 use crate::camera::CameraModel;
 use crate::frame::Frame;

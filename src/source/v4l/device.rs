@@ -1,0 +1,534 @@
+//! The V4L2 camera itself, through the `v4l` crate (memory-mapped streaming).
+//!
+//! Nothing the driver says is trusted: sizes are checked by `convert`, and the
+//! `v4l` crate's own `unwrap`/`expect`/`panic!` on unexpected driver answers
+//! (a format or control it cannot represent, a failed STREAMOFF) are caught
+//! at this boundary and become errors, so a misbehaving camera costs frames,
+//! never the run. A lost camera (unplugged, stalled) is reopened with back-off
+//! while the run goes on.
+
+use super::V4lConfig;
+use super::clock::{BUFFER_FLAG_ERROR, ClockOffset, SequenceTracker, TimeSource, capture_time_ns};
+use super::convert::{BufferLayout, PixelFormat, payload, to_gray};
+use super::{ControlSetting, FrameSource};
+use crate::camera::CameraModel;
+use crate::frame::{Frame, FrameOrigin};
+use crate::measure::mount::MountConfig;
+use crate::source::SourceItem;
+use crate::source::dir::unix_now_ns;
+use std::panic::{AssertUnwindSafe, catch_unwind};
+use std::time::{Duration, Instant};
+use v4l::buffer::Type;
+use v4l::control::{Control, Value};
+use v4l::io::mmap::Stream;
+use v4l::io::traits::CaptureStream;
+use v4l::video::Capture;
+use v4l::video::capture::Parameters;
+use v4l::{Device, Format, FourCC, Fraction};
+
+// V4L2 control ids (linux/v4l2-controls.h).
+const CID_AUTOGAIN: u32 = 0x0098_0912;
+const CID_GAIN: u32 = 0x0098_0913;
+const CID_EXPOSURE_AUTO: u32 = 0x009a_0901;
+const CID_EXPOSURE_ABSOLUTE: u32 = 0x009a_0902;
+// V4L2_CID_EXPOSURE_AUTO menu items.
+const EXPOSURE_AUTO: i64 = 0;
+const EXPOSURE_MANUAL: i64 = 1;
+const EXPOSURE_APERTURE_PRIORITY: i64 = 3;
+// V4L2_CAP_VIDEO_CAPTURE, V4L2_CAP_STREAMING.
+const CAP_VIDEO_CAPTURE: u32 = 0x0000_0001;
+const CAP_STREAMING: u32 = 0x0400_0000;
+
+/// How often the clock offset is measured again while streaming.
+const CLOCK_REFRESH: Duration = Duration::from_secs(10);
+/// Dropped-frame warnings at most this often (the count is cumulative).
+const DROP_REPORT_INTERVAL: Duration = Duration::from_secs(5);
+
+/// Runs `f`, turning a panic inside the `v4l` crate into an error.
+fn guarded<T>(what: &str, f: impl FnOnce() -> Result<T, String>) -> Result<T, String> {
+    match catch_unwind(AssertUnwindSafe(f)) {
+        Ok(r) => r,
+        Err(panic) => {
+            let message = panic
+                .downcast_ref::<&str>()
+                .map(|s| s.to_string())
+                .or_else(|| panic.downcast_ref::<String>().cloned())
+                .unwrap_or_else(|| "unknown".into());
+            Err(format!(
+                "{what}: the v4l crate failed on the driver's answer ({message})"
+            ))
+        }
+    }
+}
+
+/// What the camera granted, for the log.
+#[derive(Clone, Debug)]
+struct Granted {
+    layout: BufferLayout,
+    fps: Option<f64>,
+    exposure: String,
+    gain: String,
+    card: String,
+    driver: String,
+}
+
+impl std::fmt::Display for Granted {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let fps = self
+            .fps
+            .map_or_else(|| "unknown".to_string(), |r| format!("{r:.2}"));
+        write!(
+            f,
+            "{} ({}): {} {}x{} (stride {} bytes), {fps} fps, exposure {}, gain {}",
+            self.card,
+            self.driver,
+            self.layout.format,
+            self.layout.width,
+            self.layout.height,
+            self.layout.stride_bytes,
+            self.exposure,
+            self.gain
+        )
+    }
+}
+
+/// An open, streaming camera.
+struct OpenCamera {
+    stream: Stream<'static>,
+    // Kept open for the controls; the stream holds its own handle.
+    _device: Device,
+    granted: Granted,
+}
+
+/// A V4L2 camera as a frame source.
+pub struct V4lSource {
+    path: String,
+    config: V4lConfig,
+    camera: Option<OpenCamera>,
+    /// The granted settings at the last open (a reopen may differ).
+    granted: Granted,
+    /// The granted settings still to be logged (after an open, with the
+    /// first frame, so that they reach the MCAP `/log` as well as stderr).
+    announce: bool,
+    sequence: SequenceTracker,
+    clock: ClockOffset,
+    clock_measured: Instant,
+    backoff: Duration,
+    next_attempt: Instant,
+    reopens: u64,
+    decode_errors: u64,
+    frames: u64,
+    dequeue_times: u64,
+    last_drop_report: Option<Instant>,
+}
+
+impl V4lSource {
+    /// Opens and starts the camera; any failure here is a setup error.
+    pub fn open(path: &str, config: &V4lConfig) -> Result<Self, String> {
+        let clock = ClockOffset::measure().ok_or(
+            "cannot read CLOCK_MONOTONIC/CLOCK_REALTIME to convert the driver's timestamps",
+        )?;
+        let camera = open_camera(path, config)?;
+        tracing::info!(device = path, "camera opened: {}", camera.granted);
+        Ok(Self {
+            path: path.to_string(),
+            config: config.clone(),
+            granted: camera.granted.clone(),
+            camera: Some(camera),
+            announce: true,
+            sequence: SequenceTracker::default(),
+            clock,
+            clock_measured: Instant::now(),
+            backoff: Duration::from_millis(config.reopen_min_ms),
+            next_attempt: Instant::now(),
+            reopens: 0,
+            decode_errors: 0,
+            frames: 0,
+            dequeue_times: 0,
+            last_drop_report: None,
+        })
+    }
+
+    /// Closes a failed camera; the next frame request reopens it.
+    fn lose_camera(&mut self, why: &str) -> String {
+        if let Some(camera) = self.camera.take() {
+            // STREAMOFF and munmap on a vanished device may panic in the crate.
+            let _ = catch_unwind(AssertUnwindSafe(move || drop(camera)));
+        }
+        self.next_attempt = Instant::now();
+        self.backoff = Duration::from_millis(self.config.reopen_min_ms);
+        tracing::warn!(
+            device = %self.path,
+            "camera lost ({why}); the run goes on, reopening with back-off"
+        );
+        format!("camera {}: {why}; reopening", self.path)
+    }
+
+    /// One attempt to reopen a lost camera, after the back-off.
+    fn try_reopen(&mut self) -> Result<(), String> {
+        if let Some(wait) = self.next_attempt.checked_duration_since(Instant::now()) {
+            std::thread::sleep(wait);
+        }
+        match open_camera(&self.path, &self.config) {
+            Ok(camera) => {
+                self.reopens += 1;
+                self.sequence.restart();
+                self.granted = camera.granted.clone();
+                self.camera = Some(camera);
+                self.announce = true;
+                self.refresh_clock();
+                tracing::info!(device = %self.path, reopens = self.reopens, "camera reopened");
+                Ok(())
+            }
+            Err(e) => {
+                let wait = self.backoff;
+                self.next_attempt = Instant::now() + wait;
+                self.backoff = (wait * 2).min(Duration::from_millis(self.config.reopen_max_ms));
+                Err(format!(
+                    "camera {} unavailable ({e}); next attempt in {} ms",
+                    self.path,
+                    wait.as_millis()
+                ))
+            }
+        }
+    }
+
+    fn refresh_clock(&mut self) {
+        if let Some(c) = ClockOffset::measure() {
+            self.clock = c;
+        }
+        self.clock_measured = Instant::now();
+    }
+
+    fn report_drops(&mut self, dropped_now: u64) {
+        if dropped_now == 0 {
+            return;
+        }
+        let due = self
+            .last_drop_report
+            .is_none_or(|t| t.elapsed() >= DROP_REPORT_INTERVAL);
+        if due {
+            self.last_drop_report = Some(Instant::now());
+            tracing::warn!(
+                device = %self.path,
+                dropped_total = self.sequence.dropped(),
+                "camera driver dropped frames (gaps in its sequence numbers)"
+            );
+        }
+    }
+}
+
+/// A buffer as dequeued: the converted frame and its metadata.
+struct Dequeued {
+    image: Result<image::GrayImage, String>,
+    flags: u32,
+    seconds: i64,
+    microseconds: i64,
+    sequence: u32,
+    dequeued_unix_ns: u64,
+}
+
+impl FrameSource for V4lSource {
+    fn camera(&self) -> Option<CameraModel> {
+        None
+    }
+    fn mount(&self) -> Option<MountConfig> {
+        None
+    }
+    fn fps(&self) -> Option<f64> {
+        self.granted.fps
+    }
+    fn next_frame(&mut self) -> Option<SourceItem> {
+        if self.camera.is_none()
+            && let Err(e) = self.try_reopen()
+        {
+            return Some(Err(e));
+        }
+        if self.clock_measured.elapsed() >= CLOCK_REFRESH {
+            self.refresh_clock();
+        }
+        let camera = self.camera.as_mut()?;
+        let layout = camera.granted.layout;
+        let dequeued = guarded("dequeue", || {
+            let (buffer, meta) = CaptureStream::next(&mut camera.stream).map_err(|e| {
+                if e.kind() == std::io::ErrorKind::TimedOut {
+                    "no frame within frame_timeout_ms".to_string()
+                } else {
+                    e.to_string()
+                }
+            })?;
+            let dequeued_unix_ns = unix_now_ns();
+            let flags = u32::from(meta.flags);
+            let image = if flags & BUFFER_FLAG_ERROR != 0 {
+                Err("the driver marked the buffer as corrupt".into())
+            } else {
+                to_gray(&layout, payload(buffer, meta.bytesused)).map_err(|e| e.to_string())
+            };
+            Ok(Dequeued {
+                image,
+                flags,
+                seconds: i64::from(meta.timestamp.sec),
+                microseconds: i64::from(meta.timestamp.usec),
+                sequence: meta.sequence,
+                dequeued_unix_ns,
+            })
+        });
+        let d = match dequeued {
+            Ok(d) => d,
+            Err(e) => return Some(Err(self.lose_camera(&e))),
+        };
+        let (seq, dropped_now) = self.sequence.observe(d.sequence);
+        self.report_drops(dropped_now);
+        let (capture_time_ns, time_source) = capture_time_ns(
+            d.flags,
+            d.seconds,
+            d.microseconds,
+            &self.clock,
+            d.dequeued_unix_ns,
+        );
+        if time_source == TimeSource::Dequeue {
+            if self.dequeue_times == 0 {
+                tracing::warn!(
+                    device = %self.path,
+                    "the driver's buffer timestamps are not CLOCK_MONOTONIC (or are off by \
+                     more than 1 s): capture time = dequeue time"
+                );
+            }
+            self.dequeue_times += 1;
+        }
+        if self.announce {
+            self.announce = false;
+            tracing::info!(
+                device = %self.path,
+                clock_offset_uncertainty_ns = self.clock.uncertainty_ns as i64,
+                "camera streaming: {}",
+                self.granted
+            );
+        }
+        match d.image {
+            Ok(image) => {
+                self.frames += 1;
+                Some(Ok(Frame {
+                    seq,
+                    capture_time_ns,
+                    image,
+                    origin: FrameOrigin::Camera {
+                        device: self.path.clone(),
+                    },
+                }))
+            }
+            Err(e) => {
+                self.decode_errors += 1;
+                Some(Err(format!("camera {} frame {seq}: {e}", self.path)))
+            }
+        }
+    }
+}
+
+impl Drop for V4lSource {
+    fn drop(&mut self) {
+        tracing::info!(
+            device = %self.path,
+            frames = self.frames,
+            dropped_by_driver = self.sequence.dropped(),
+            unreadable = self.decode_errors,
+            reopens = self.reopens,
+            stamped_at_dequeue = self.dequeue_times,
+            "camera closed"
+        );
+        if let Some(camera) = self.camera.take() {
+            let _ = catch_unwind(AssertUnwindSafe(move || drop(camera)));
+        }
+    }
+}
+
+/// Opens the device, negotiates format, rate and controls, starts streaming.
+fn open_camera(path: &str, config: &V4lConfig) -> Result<OpenCamera, String> {
+    guarded("open", || {
+        let device = Device::with_path(path).map_err(|e| e.to_string())?;
+        let caps = device
+            .query_caps()
+            .map_err(|e| format!("not a V4L2 device ({e})"))?;
+        let flags = u32::from(caps.capabilities);
+        if flags & CAP_VIDEO_CAPTURE == 0 || flags & CAP_STREAMING == 0 {
+            return Err(format!(
+                "{} ({}) is not a streaming video capture device (a metadata node? try the \
+                 other /dev/video number of this camera)",
+                caps.card, caps.driver
+            ));
+        }
+        let layout = negotiate_format(&device, config)?;
+        let fps = negotiate_rate(&device, config.fps);
+        let exposure = set_exposure(&device, config.exposure);
+        let gain = set_gain(&device, config.gain);
+        let mut stream = Stream::with_buffers(&device, Type::VideoCapture, config.buffers)
+            .map_err(|e| format!("buffers: {e}"))?;
+        stream.set_timeout(Duration::from_millis(config.frame_timeout_ms));
+        Ok(OpenCamera {
+            stream,
+            _device: device,
+            granted: Granted {
+                layout,
+                fps,
+                exposure,
+                gain,
+                card: caps.card,
+                driver: caps.driver,
+            },
+        })
+    })
+}
+
+/// The first preferred format the camera offers, at the size asked for (or
+/// the size the driver grants instead).
+fn negotiate_format(device: &Device, config: &V4lConfig) -> Result<BufferLayout, String> {
+    let offered: Vec<[u8; 4]> = device
+        .enum_formats()
+        .map_err(|e| format!("formats: {e}"))?
+        .iter()
+        .map(|d| d.fourcc.repr)
+        .collect();
+    for &wanted in &config.formats {
+        if !offered.contains(&wanted.fourcc()) {
+            continue;
+        }
+        let asked = Format::new(config.width, config.height, FourCC::new(&wanted.fourcc()));
+        let granted = device
+            .set_format(&asked)
+            .map_err(|e| format!("format {wanted}: {e}"))?;
+        if PixelFormat::from_fourcc(granted.fourcc.repr) != Some(wanted) {
+            continue;
+        }
+        if (granted.width, granted.height) != (config.width, config.height) {
+            tracing::warn!(
+                "camera granted {}x{} instead of the {}x{} asked for: the camera file must \
+                 match the granted size",
+                granted.width,
+                granted.height,
+                config.width,
+                config.height
+            );
+        }
+        return Ok(BufferLayout {
+            format: wanted,
+            width: granted.width,
+            height: granted.height,
+            stride_bytes: granted.stride,
+        });
+    }
+    let names: Vec<String> = offered
+        .iter()
+        .map(|c| String::from_utf8_lossy(c).into_owned())
+        .collect();
+    Err(format!(
+        "the camera offers none of the formats in [v4l] formats; it offers {}",
+        names.join(", ")
+    ))
+}
+
+/// Asks for `fps`; the granted rate (the driver's interval), when it says.
+fn negotiate_rate(device: &Device, fps: f64) -> Option<f64> {
+    let interval = Fraction::new(1000, (fps * 1000.0).round() as u32);
+    let params = match device.set_params(&Parameters::new(interval)) {
+        Ok(p) => Some(p),
+        Err(e) => {
+            tracing::warn!("camera frame rate not set ({e}): the driver's own rate is used");
+            device.params().ok()
+        }
+    }?;
+    let Fraction {
+        numerator,
+        denominator,
+    } = params.interval;
+    (numerator > 0 && denominator > 0).then(|| f64::from(denominator) / f64::from(numerator))
+}
+
+fn read_control(device: &Device, id: u32) -> Option<i64> {
+    match device.control(id).ok()?.value {
+        Value::Integer(v) => Some(v),
+        Value::Boolean(b) => Some(i64::from(b)),
+        _ => None,
+    }
+}
+
+fn set_control(device: &Device, id: u32, value: i64) -> Result<(), String> {
+    device
+        .set_control(Control {
+            id,
+            value: Value::Integer(value),
+        })
+        .map_err(|e| e.to_string())
+}
+
+/// Applies the exposure setting; returns what the camera now has, for the log.
+fn set_exposure(device: &Device, setting: ControlSetting) -> String {
+    let result = match setting {
+        ControlSetting::Driver => Ok(()),
+        // Full auto where offered; UVC cameras mostly offer only aperture
+        // priority (= auto exposure time at a fixed iris).
+        ControlSetting::Auto => set_control(device, CID_EXPOSURE_AUTO, EXPOSURE_AUTO)
+            .or_else(|_| set_control(device, CID_EXPOSURE_AUTO, EXPOSURE_APERTURE_PRIORITY)),
+        ControlSetting::Value(v) => set_control(device, CID_EXPOSURE_AUTO, EXPOSURE_MANUAL)
+            .and_then(|()| set_control(device, CID_EXPOSURE_ABSOLUTE, i64::from(v))),
+    };
+    if let Err(e) = result {
+        tracing::warn!("camera exposure {setting:?} not set ({e}): left as the driver has it");
+    }
+    let mode = match read_control(device, CID_EXPOSURE_AUTO) {
+        Some(EXPOSURE_MANUAL) => "manual",
+        Some(_) => "auto",
+        None => "mode unknown",
+    };
+    match read_control(device, CID_EXPOSURE_ABSOLUTE) {
+        Some(v) => format!("{mode}, {v} x 100 us"),
+        None => format!("{mode} (no absolute exposure control)"),
+    }
+}
+
+/// Applies the gain setting where the camera offers one.
+fn set_gain(device: &Device, setting: ControlSetting) -> String {
+    let result = match setting {
+        ControlSetting::Driver => Ok(()),
+        ControlSetting::Auto => set_control(device, CID_AUTOGAIN, 1),
+        ControlSetting::Value(v) => {
+            // Cameras without an auto-gain control accept the gain directly.
+            let _ = set_control(device, CID_AUTOGAIN, 0);
+            set_control(device, CID_GAIN, i64::from(v))
+        }
+    };
+    if let Err(e) = result {
+        tracing::warn!("camera gain {setting:?} not set ({e}): left as the driver has it");
+    }
+    let auto =
+        read_control(device, CID_AUTOGAIN).map_or("", |a| if a != 0 { "auto, " } else { "" });
+    match read_control(device, CID_GAIN) {
+        Some(v) => format!("{auto}{v}"),
+        None => format!("{auto}not offered"),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::config::Config;
+
+    #[test]
+    fn a_file_that_is_not_a_camera_is_refused() {
+        let e = open_camera("/dev/null", &Config::embedded().v4l)
+            .err()
+            .expect("/dev/null is not a camera");
+        assert!(e.contains("not a V4L2 device"), "{e}");
+    }
+
+    #[test]
+    fn a_panic_in_the_crate_becomes_an_error() {
+        let e = guarded("dequeue", || -> Result<(), String> {
+            panic!("Invalid field order")
+        })
+        .unwrap_err();
+        assert!(
+            e.contains("dequeue") && e.contains("Invalid field order"),
+            "{e}"
+        );
+    }
+}
