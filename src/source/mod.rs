@@ -71,6 +71,13 @@ pub trait FrameSource: Send {
     fn recorded_timeline(&self) -> bool {
         false
     }
+    /// Whether frames come in real time whatever the pipeline does (a
+    /// camera): such a source must not wait for the measurement; a frame
+    /// that finds it busy is skipped for measurement (and still logged),
+    /// or else the driver's buffers fill and the latency grows.
+    fn live(&self) -> bool {
+        false
+    }
     /// The next frame; `None` at the end of the source.
     fn next_frame(&mut self) -> Option<SourceItem>;
 }

@@ -218,6 +218,11 @@ impl V4lSource {
     }
 }
 
+/// A `timeval` field: `time_t` is i64 on 64-bit Linux, i32 on 32-bit ARM boards.
+fn time_field<T: Into<i64>>(value: T) -> i64 {
+    value.into()
+}
+
 /// A buffer as dequeued: the converted frame and its metadata.
 struct Dequeued {
     image: Result<image::GrayImage, String>,
@@ -237,6 +242,9 @@ impl FrameSource for V4lSource {
     }
     fn fps(&self) -> Option<f64> {
         self.granted.fps
+    }
+    fn live(&self) -> bool {
+        true
     }
     fn next_frame(&mut self) -> Option<SourceItem> {
         if self.camera.is_none()
@@ -267,8 +275,8 @@ impl FrameSource for V4lSource {
             Ok(Dequeued {
                 image,
                 flags,
-                seconds: i64::from(meta.timestamp.sec),
-                microseconds: i64::from(meta.timestamp.usec),
+                seconds: time_field(meta.timestamp.sec),
+                microseconds: time_field(meta.timestamp.usec),
                 sequence: meta.sequence,
                 dequeued_unix_ns,
             })
