@@ -7,9 +7,9 @@
 //! never the run. A lost camera (unplugged, stalled) is reopened with back-off
 //! while the run goes on.
 
-use super::V4lConfig;
 use super::clock::{BUFFER_FLAG_ERROR, ClockOffset, SequenceTracker, TimeSource, capture_time_ns};
 use super::convert::{BufferLayout, PixelFormat, payload, to_gray};
+use super::{Backoff, V4lConfig};
 use super::{ControlSetting, FrameSource};
 use crate::camera::CameraModel;
 use crate::frame::{Frame, FrameOrigin};
@@ -113,7 +113,7 @@ pub struct V4lSource {
     sequence: SequenceTracker,
     clock: ClockOffset,
     clock_measured: Instant,
-    backoff: Duration,
+    backoff: Backoff,
     next_attempt: Instant,
     reopens: u64,
     decode_errors: u64,
@@ -139,7 +139,7 @@ impl V4lSource {
             sequence: SequenceTracker::default(),
             clock,
             clock_measured: Instant::now(),
-            backoff: Duration::from_millis(config.reopen_min_ms),
+            backoff: Backoff::new(config),
             next_attempt: Instant::now(),
             reopens: 0,
             decode_errors: 0,
@@ -156,7 +156,7 @@ impl V4lSource {
             let _ = catch_unwind(AssertUnwindSafe(move || drop(camera)));
         }
         self.next_attempt = Instant::now();
-        self.backoff = Duration::from_millis(self.config.reopen_min_ms);
+        self.backoff.reset();
         tracing::warn!(
             device = %self.path,
             "camera lost ({why}); the run goes on, reopening with back-off"
@@ -181,9 +181,8 @@ impl V4lSource {
                 Ok(())
             }
             Err(e) => {
-                let wait = self.backoff;
+                let wait = self.backoff.failed();
                 self.next_attempt = Instant::now() + wait;
-                self.backoff = (wait * 2).min(Duration::from_millis(self.config.reopen_max_ms));
                 Err(format!(
                     "camera {} unavailable ({e}); next attempt in {} ms",
                     self.path,
@@ -387,8 +386,11 @@ fn open_camera(path: &str, config: &V4lConfig) -> Result<OpenCamera, String> {
     })
 }
 
-/// The first preferred format the camera offers, at the size asked for (or
-/// the size the driver grants instead).
+/// The first preferred format the camera offers at exactly the size asked
+/// for. Another size is refused, never used: the camera file is a
+/// calibration at one size, and frames of another would give wrong poses.
+/// (USB cameras often offer the full size only as MJPG: the preference list
+/// then moves on to it.)
 fn negotiate_format(device: &Device, config: &V4lConfig) -> Result<BufferLayout, String> {
     let offered: Vec<[u8; 4]> = device
         .enum_formats()
@@ -396,26 +398,30 @@ fn negotiate_format(device: &Device, config: &V4lConfig) -> Result<BufferLayout,
         .iter()
         .map(|d| d.fourcc.repr)
         .collect();
+    let mut refused = Vec::new();
     for &wanted in &config.formats {
         if !offered.contains(&wanted.fourcc()) {
             continue;
         }
         let asked = Format::new(config.width, config.height, FourCC::new(&wanted.fourcc()));
-        let granted = device
-            .set_format(&asked)
-            .map_err(|e| format!("format {wanted}: {e}"))?;
-        if PixelFormat::from_fourcc(granted.fourcc.repr) != Some(wanted) {
-            continue;
-        }
-        if (granted.width, granted.height) != (config.width, config.height) {
-            tracing::warn!(
-                "camera granted {}x{} instead of the {}x{} asked for: the camera file must \
-                 match the granted size",
+        let granted = match device.set_format(&asked) {
+            Ok(g) => g,
+            Err(e) => {
+                refused.push(format!("{wanted}: {e}"));
+                continue;
+            }
+        };
+        let granted_format = PixelFormat::from_fourcc(granted.fourcc.repr);
+        if granted_format != Some(wanted)
+            || (granted.width, granted.height) != (config.width, config.height)
+        {
+            refused.push(format!(
+                "{wanted}: granted {} {}x{}",
+                String::from_utf8_lossy(&granted.fourcc.repr),
                 granted.width,
-                granted.height,
-                config.width,
-                config.height
-            );
+                granted.height
+            ));
+            continue;
         }
         return Ok(BufferLayout {
             format: wanted,
@@ -429,8 +435,22 @@ fn negotiate_format(device: &Device, config: &V4lConfig) -> Result<BufferLayout,
         .map(|c| String::from_utf8_lossy(c).into_owned())
         .collect();
     Err(format!(
-        "the camera offers none of the formats in [v4l] formats; it offers {}",
-        names.join(", ")
+        "no format of [v4l] formats at {}x{} (asked: {}); the camera offers {}{}; \
+         see `v4l2-ctl -d DEVICE --list-formats-ext`",
+        config.width,
+        config.height,
+        config
+            .formats
+            .iter()
+            .map(|f| f.to_string())
+            .collect::<Vec<_>>()
+            .join(", "),
+        names.join(", "),
+        if refused.is_empty() {
+            String::new()
+        } else {
+            format!(" (refused: {})", refused.join("; "))
+        }
     ))
 }
 

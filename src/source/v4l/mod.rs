@@ -57,8 +57,9 @@ impl From<ControlSetting> for SettingText {
     }
 }
 
-/// `[v4l]`: what to ask the camera for. The driver may grant something else
-/// (another size or rate); what it granted is logged when the camera opens.
+/// `[v4l]`: what to ask the camera for. The size must be granted exactly (it
+/// is the calibration's); the rate and controls are what the driver grants,
+/// logged when the camera opens.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct V4lConfig {
@@ -119,6 +120,35 @@ impl V4lConfig {
             ));
         }
         Ok(())
+    }
+}
+
+/// Waits between attempts to reopen a lost camera: `min`, doubling up to `max`.
+#[derive(Clone, Debug)]
+pub struct Backoff {
+    min: std::time::Duration,
+    max: std::time::Duration,
+    next: std::time::Duration,
+}
+
+impl Backoff {
+    pub fn new(config: &V4lConfig) -> Self {
+        let min = std::time::Duration::from_millis(config.reopen_min_ms);
+        Self {
+            min,
+            max: std::time::Duration::from_millis(config.reopen_max_ms),
+            next: min,
+        }
+    }
+    /// The wait before the next attempt, after a failed one.
+    pub fn failed(&mut self) -> std::time::Duration {
+        let wait = self.next;
+        self.next = (wait * 2).min(self.max);
+        wait
+    }
+    /// The camera works again: the next loss starts from `min`.
+    pub fn reset(&mut self) {
+        self.next = self.min;
     }
 }
 
@@ -238,6 +268,20 @@ mod tests {
             let e = c.validate().unwrap_err();
             assert!(e.contains(key), "{key}: {e}");
         }
+    }
+
+    #[test]
+    fn reopen_backoff_doubles_to_its_cap_and_resets() {
+        let config = V4lConfig {
+            reopen_min_ms: 200,
+            reopen_max_ms: 1000,
+            ..Config::embedded().v4l
+        };
+        let mut b = Backoff::new(&config);
+        let ms: Vec<u128> = (0..5).map(|_| b.failed().as_millis()).collect();
+        assert_eq!(ms, [200, 400, 800, 1000, 1000]);
+        b.reset();
+        assert_eq!(b.failed().as_millis(), 200);
     }
 
     #[cfg(not(feature = "v4l"))]
