@@ -4,20 +4,16 @@
 //! `v4l` crate's own `unwrap`/`expect`/`panic!` on unexpected driver answers
 //! (a format or control it cannot represent, a failed STREAMOFF) are caught
 //! at this boundary and become errors, so a misbehaving camera costs frames,
-//! never the run. A lost camera (unplugged, stalled) is reopened with back-off
-//! while the run goes on.
+//! never the run. Losing and reopening the camera, time stamps and sequence
+//! numbers are `live.rs`'s (tested there with a scripted camera).
 
-use super::clock::{BUFFER_FLAG_ERROR, ClockOffset, SequenceTracker, TimeSource, capture_time_ns};
+use super::clock::{BUFFER_FLAG_ERROR, ClockOffset};
 use super::convert::{BufferLayout, PixelFormat, payload, to_gray};
-use super::{Backoff, V4lConfig};
-use super::{ControlSetting, FrameSource};
-use crate::camera::CameraModel;
-use crate::frame::{Frame, FrameOrigin};
-use crate::measure::mount::MountConfig;
-use crate::source::SourceItem;
+use super::live::{Camera, CameraOpener, RawBuffer};
+use super::{ControlSetting, V4lConfig};
 use crate::source::dir::unix_now_ns;
 use std::panic::{AssertUnwindSafe, catch_unwind};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 use v4l::buffer::Type;
 use v4l::control::{Control, Value};
 use v4l::io::mmap::Stream;
@@ -38,11 +34,6 @@ const EXPOSURE_APERTURE_PRIORITY: i64 = 3;
 // V4L2_CAP_VIDEO_CAPTURE, V4L2_CAP_STREAMING.
 const CAP_VIDEO_CAPTURE: u32 = 0x0000_0001;
 const CAP_STREAMING: u32 = 0x0400_0000;
-
-/// How often the clock offset is measured again while streaming.
-const CLOCK_REFRESH: Duration = Duration::from_secs(10);
-/// Dropped-frame warnings at most this often (the count is cumulative).
-const DROP_REPORT_INTERVAL: Duration = Duration::from_secs(5);
 
 /// Runs `f`, turning a panic inside the `v4l` crate into an error.
 fn guarded<T>(what: &str, f: impl FnOnce() -> Result<T, String>) -> Result<T, String> {
@@ -93,128 +84,11 @@ impl std::fmt::Display for Granted {
 }
 
 /// An open, streaming camera.
-struct OpenCamera {
+pub struct OpenCamera {
     stream: Stream<'static>,
     // Kept open for the controls; the stream holds its own handle.
     _device: Device,
     granted: Granted,
-}
-
-/// A V4L2 camera as a frame source.
-pub struct V4lSource {
-    path: String,
-    config: V4lConfig,
-    camera: Option<OpenCamera>,
-    /// The granted settings at the last open (a reopen may differ).
-    granted: Granted,
-    /// The granted settings still to be logged (after an open, with the
-    /// first frame, so that they reach the MCAP `/log` as well as stderr).
-    announce: bool,
-    sequence: SequenceTracker,
-    clock: ClockOffset,
-    clock_measured: Instant,
-    backoff: Backoff,
-    next_attempt: Instant,
-    reopens: u64,
-    decode_errors: u64,
-    frames: u64,
-    dequeue_times: u64,
-    last_drop_report: Option<Instant>,
-}
-
-impl V4lSource {
-    /// Opens and starts the camera; any failure here is a setup error.
-    pub fn open(path: &str, config: &V4lConfig) -> Result<Self, String> {
-        let clock = ClockOffset::measure().ok_or(
-            "cannot read CLOCK_MONOTONIC/CLOCK_REALTIME to convert the driver's timestamps",
-        )?;
-        let camera = open_camera(path, config)?;
-        tracing::info!(device = path, "camera opened: {}", camera.granted);
-        Ok(Self {
-            path: path.to_string(),
-            config: config.clone(),
-            granted: camera.granted.clone(),
-            camera: Some(camera),
-            announce: true,
-            sequence: SequenceTracker::default(),
-            clock,
-            clock_measured: Instant::now(),
-            backoff: Backoff::new(config),
-            next_attempt: Instant::now(),
-            reopens: 0,
-            decode_errors: 0,
-            frames: 0,
-            dequeue_times: 0,
-            last_drop_report: None,
-        })
-    }
-
-    /// Closes a failed camera; the next frame request reopens it.
-    fn lose_camera(&mut self, why: &str) -> String {
-        if let Some(camera) = self.camera.take() {
-            // STREAMOFF and munmap on a vanished device may panic in the crate.
-            let _ = catch_unwind(AssertUnwindSafe(move || drop(camera)));
-        }
-        self.next_attempt = Instant::now();
-        self.backoff.reset();
-        tracing::warn!(
-            device = %self.path,
-            "camera lost ({why}); the run goes on, reopening with back-off"
-        );
-        format!("camera {}: {why}; reopening", self.path)
-    }
-
-    /// One attempt to reopen a lost camera, after the back-off.
-    fn try_reopen(&mut self) -> Result<(), String> {
-        if let Some(wait) = self.next_attempt.checked_duration_since(Instant::now()) {
-            std::thread::sleep(wait);
-        }
-        match open_camera(&self.path, &self.config) {
-            Ok(camera) => {
-                self.reopens += 1;
-                self.sequence.restart();
-                self.granted = camera.granted.clone();
-                self.camera = Some(camera);
-                self.announce = true;
-                self.refresh_clock();
-                tracing::info!(device = %self.path, reopens = self.reopens, "camera reopened");
-                Ok(())
-            }
-            Err(e) => {
-                let wait = self.backoff.failed();
-                self.next_attempt = Instant::now() + wait;
-                Err(format!(
-                    "camera {} unavailable ({e}); next attempt in {} ms",
-                    self.path,
-                    wait.as_millis()
-                ))
-            }
-        }
-    }
-
-    fn refresh_clock(&mut self) {
-        if let Some(c) = ClockOffset::measure() {
-            self.clock = c;
-        }
-        self.clock_measured = Instant::now();
-    }
-
-    fn report_drops(&mut self, dropped_now: u64) {
-        if dropped_now == 0 {
-            return;
-        }
-        let due = self
-            .last_drop_report
-            .is_none_or(|t| t.elapsed() >= DROP_REPORT_INTERVAL);
-        if due {
-            self.last_drop_report = Some(Instant::now());
-            tracing::warn!(
-                device = %self.path,
-                dropped_total = self.sequence.dropped(),
-                "camera driver dropped frames (gaps in its sequence numbers)"
-            );
-        }
-    }
 }
 
 /// A `timeval` field: `time_t` is i64 on 64-bit Linux, i32 on 32-bit ARM boards.
@@ -222,42 +96,12 @@ fn time_field<T: Into<i64>>(value: T) -> i64 {
     value.into()
 }
 
-/// A buffer as dequeued: the converted frame and its metadata.
-struct Dequeued {
-    image: Result<image::GrayImage, String>,
-    flags: u32,
-    seconds: i64,
-    microseconds: i64,
-    sequence: u32,
-    dequeued_unix_ns: u64,
-}
-
-impl FrameSource for V4lSource {
-    fn camera(&self) -> Option<CameraModel> {
-        None
-    }
-    fn mount(&self) -> Option<MountConfig> {
-        None
-    }
-    fn fps(&self) -> Option<f64> {
-        self.granted.fps
-    }
-    fn live(&self) -> bool {
-        true
-    }
-    fn next_frame(&mut self) -> Option<SourceItem> {
-        if self.camera.is_none()
-            && let Err(e) = self.try_reopen()
-        {
-            return Some(Err(e));
-        }
-        if self.clock_measured.elapsed() >= CLOCK_REFRESH {
-            self.refresh_clock();
-        }
-        let camera = self.camera.as_mut()?;
-        let layout = camera.granted.layout;
-        let dequeued = guarded("dequeue", || {
-            let (buffer, meta) = CaptureStream::next(&mut camera.stream).map_err(|e| {
+impl Camera for OpenCamera {
+    fn next_buffer(&mut self) -> Result<RawBuffer, String> {
+        let layout = self.granted.layout;
+        let stream = &mut self.stream;
+        guarded("dequeue", || {
+            let (buffer, meta) = CaptureStream::next(stream).map_err(|e| {
                 if e.kind() == std::io::ErrorKind::TimedOut {
                     "no frame within frame_timeout_ms".to_string()
                 } else {
@@ -271,7 +115,7 @@ impl FrameSource for V4lSource {
             } else {
                 to_gray(&layout, payload(buffer, meta.bytesused)).map_err(|e| e.to_string())
             };
-            Ok(Dequeued {
+            Ok(RawBuffer {
                 image,
                 flags,
                 seconds: time_field(meta.timestamp.sec),
@@ -279,73 +123,29 @@ impl FrameSource for V4lSource {
                 sequence: meta.sequence,
                 dequeued_unix_ns,
             })
-        });
-        let d = match dequeued {
-            Ok(d) => d,
-            Err(e) => return Some(Err(self.lose_camera(&e))),
-        };
-        let (seq, dropped_now) = self.sequence.observe(d.sequence);
-        self.report_drops(dropped_now);
-        let (capture_time_ns, time_source) = capture_time_ns(
-            d.flags,
-            d.seconds,
-            d.microseconds,
-            &self.clock,
-            d.dequeued_unix_ns,
-        );
-        if time_source == TimeSource::Dequeue {
-            if self.dequeue_times == 0 {
-                tracing::warn!(
-                    device = %self.path,
-                    "the driver's buffer timestamps are not CLOCK_MONOTONIC (or are off by \
-                     more than 1 s): capture time = dequeue time"
-                );
-            }
-            self.dequeue_times += 1;
-        }
-        if self.announce {
-            self.announce = false;
-            tracing::info!(
-                device = %self.path,
-                clock_offset_uncertainty_ns = self.clock.uncertainty_ns as i64,
-                "camera streaming: {}",
-                self.granted
-            );
-        }
-        match d.image {
-            Ok(image) => {
-                self.frames += 1;
-                Some(Ok(Frame {
-                    seq,
-                    capture_time_ns,
-                    image,
-                    origin: FrameOrigin::Camera {
-                        device: self.path.clone(),
-                    },
-                }))
-            }
-            Err(e) => {
-                self.decode_errors += 1;
-                Some(Err(format!("camera {} frame {seq}: {e}", self.path)))
-            }
-        }
+        })
+    }
+    fn description(&self) -> String {
+        self.granted.to_string()
+    }
+    fn fps(&self) -> Option<f64> {
+        self.granted.fps
     }
 }
 
-impl Drop for V4lSource {
-    fn drop(&mut self) {
-        tracing::info!(
-            device = %self.path,
-            frames = self.frames,
-            dropped_by_driver = self.sequence.dropped(),
-            unreadable = self.decode_errors,
-            reopens = self.reopens,
-            stamped_at_dequeue = self.dequeue_times,
-            "camera closed"
-        );
-        if let Some(camera) = self.camera.take() {
-            let _ = catch_unwind(AssertUnwindSafe(move || drop(camera)));
-        }
+/// Opens `path` with the `[v4l]` settings, as often as the camera is lost.
+pub struct V4lOpener {
+    pub path: String,
+    pub config: V4lConfig,
+}
+
+impl CameraOpener for V4lOpener {
+    type Camera = OpenCamera;
+    fn open(&mut self) -> Result<OpenCamera, String> {
+        open_camera(&self.path, &self.config)
+    }
+    fn clock_offset(&self) -> Option<ClockOffset> {
+        ClockOffset::measure()
     }
 }
 

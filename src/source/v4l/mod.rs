@@ -8,6 +8,7 @@ pub mod clock;
 pub mod convert;
 #[cfg(feature = "v4l")]
 mod device;
+pub mod live;
 
 use super::{FrameSource, SourceError};
 pub use convert::PixelFormat;
@@ -160,9 +161,12 @@ pub fn open(device: &str, config: &V4lConfig) -> Result<Box<dyn FrameSource>, So
         message,
     };
     config.validate().map_err(open_err)?;
-    Ok(Box::new(
-        device::V4lSource::open(device, config).map_err(open_err)?,
-    ))
+    let opener = device::V4lOpener {
+        path: device.to_string(),
+        config: config.clone(),
+    };
+    let source = live::LiveSource::open(device, opener, Backoff::new(config)).map_err(open_err)?;
+    Ok(Box::new(source))
 }
 
 /// Without the `v4l` feature there is no camera support: says how to get it.
