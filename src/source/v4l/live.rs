@@ -126,13 +126,19 @@ impl<O: CameraOpener> LiveSource<O> {
             close(camera);
         }
         self.stats.losses += 1;
-        self.next_attempt = Instant::now();
-        self.backoff.reset();
+        // The back-off goes on growing until a frame comes through, so a
+        // camera that opens but never delivers is not reopened in a tight loop.
+        let wait = self.backoff.failed();
+        self.next_attempt = Instant::now() + wait;
         tracing::warn!(
             device = %self.name,
             "camera lost ({why}); the run goes on, reopening with back-off"
         );
-        format!("camera {}: {why}; reopening", self.name)
+        format!(
+            "camera {}: {why}; reopening in {} ms",
+            self.name,
+            wait.as_millis()
+        )
     }
 
     /// One attempt to reopen a lost camera, after the back-off.
@@ -244,6 +250,7 @@ impl<O: CameraOpener> FrameSource for LiveSource<O> {
                 granted.unwrap_or_default()
             );
         }
+        self.backoff.reset();
         match buffer.image {
             Ok(image) => {
                 self.stats.frames += 1;
@@ -476,12 +483,13 @@ mod tests {
         assert_eq!(s.next_frame().unwrap().unwrap().seq, 0);
         *failures.lock().unwrap() = 3;
         let lost = s.next_frame().unwrap().unwrap_err();
-        assert!(lost.contains("reopening"), "{lost}");
-        // Three failed attempts, each an error item with its wait: 1, 2, 4 ms.
+        assert!(lost.contains("reopening in 1 ms"), "{lost}");
+        // Three failed attempts, each an error item with its wait: 2, 4, 4 ms
+        // (doubling from the loss's 1 ms, capped at 4).
         let waits: Vec<String> = (0..3)
             .map(|_| s.next_frame().unwrap().unwrap_err())
             .collect();
-        for (e, ms) in waits.iter().zip([1, 2, 4]) {
+        for (e, ms) in waits.iter().zip([2, 4, 4]) {
             assert!(e.contains(&format!("next attempt in {ms} ms")), "{e}");
         }
         let back = s.next_frame().unwrap().unwrap();
@@ -492,6 +500,19 @@ mod tests {
         assert_eq!((st.losses, st.reopens, st.frames), (1, 1, 3));
         assert_eq!(st.dropped_by_driver, 0);
         assert_eq!(*opens.lock().unwrap(), 2);
+    }
+
+    #[test]
+    fn a_camera_that_opens_but_never_delivers_is_retried_ever_more_slowly() {
+        let (mut s, _, opens) = source(vec![Step::Lost; 4], 0);
+        let errors: Vec<String> = (0..4)
+            .map(|_| s.next_frame().unwrap().unwrap_err())
+            .collect();
+        for (e, ms) in errors.iter().zip([1, 2, 4, 4]) {
+            assert!(e.contains(&format!("reopening in {ms} ms")), "{e}");
+        }
+        assert_eq!(*opens.lock().unwrap(), 4);
+        assert_eq!(s.stats().losses, 4);
     }
 
     #[test]
