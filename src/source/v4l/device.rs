@@ -152,7 +152,14 @@ impl CameraOpener for V4lOpener {
 /// Opens the device, negotiates format, rate and controls, starts streaming.
 fn open_camera(path: &str, config: &V4lConfig) -> Result<OpenCamera, String> {
     guarded("open", || {
-        let device = Device::with_path(path).map_err(|e| e.to_string())?;
+        let device = Device::with_path(path).map_err(|e| {
+            let hint = if e.kind() == std::io::ErrorKind::PermissionDenied {
+                " (is the user in the `video` group?)"
+            } else {
+                ""
+            };
+            format!("cannot open {path}: {e}{hint}")
+        })?;
         let caps = device
             .query_caps()
             .map_err(|e| format!("not a V4L2 device ({e})"))?;
