@@ -107,6 +107,7 @@ fn inputs() -> Vec<(Arc<Frame>, Arc<Measurement>, serde_json::Value)> {
                 rim_fully_in_image: true,
                 position_body: centre.into(),
                 normal_body: normal.into(),
+                ned_frame: drogue_sim::NED_FRAME_SCENARIO.into(),
                 position_ned: [0.0; 3],
                 receiver_position_ned: [0.0; 3],
                 receiver_q_ned_body: [1.0, 0.0, 0.0, 0.0],

@@ -54,6 +54,39 @@ pub struct DrogueConfig {
 pub struct RunConfig {
     /// Frame source: `sim:NAME_OR_FILE`, `dir:PATH`, `mcap:PATH`, `v4l:/dev/videoN`.
     pub source: String,
+    /// Where a `sim:` source's receiver pose comes from (SITL closed loop).
+    pub vehicle_pose: VehiclePoseSource,
+    /// `mavlink`: how long to wait for the autopilot's first pose, seconds.
+    pub vehicle_pose_timeout_s: f64,
+    /// `mavlink`: how the autopilot's local NED sits in the scenario's world.
+    pub sitl_anchor: SitlAnchor,
+    /// `mavlink`: frames are captured this long before they are rendered, so
+    /// the autopilot's pose at the capture is interpolated, not extrapolated.
+    pub vehicle_pose_delay_ms: u64,
+}
+
+/// `[run] vehicle_pose`: who flies the simulated receiver.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "snake_case")]
+pub enum VehiclePoseSource {
+    /// The scenario's scripted approach.
+    Script,
+    /// The autopilot on the MAVLink link (LOCAL_POSITION_NED + ATTITUDE).
+    Mavlink,
+}
+
+/// `[run] sitl_anchor`: the autopilot's local NED in the scenario's world.
+/// Both are placed at the autopilot's first pose (a translation and a yaw);
+/// they differ in whether that placement then moves with the tanker.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SitlAnchor {
+    /// Moves with the tanker: a vehicle holding its position keeps station
+    /// behind the drogue (multicopter SITL).
+    Tanker,
+    /// Fixed in the world: the vehicle itself must fly the tanker's speed
+    /// and course (fixed-wing SITL, scenario `[tanker] airspeed_mps`).
+    World,
 }
 
 /// The whole configuration.

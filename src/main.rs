@@ -101,6 +101,9 @@ fn main() -> ExitCode {
                     "{} frames, {} detected, {} unreadable, {} other files skipped, {:.2} ms per frame",
                     s.frames, s.detected, s.unreadable, s.skipped, s.ms_per_frame
                 );
+                if let Some(log) = &s.log_file {
+                    eprintln!("log: {}", log.display());
+                }
                 ExitCode::SUCCESS
             }
             Err(e @ commands::process::ProcessError::Output { .. }) => {

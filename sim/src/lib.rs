@@ -37,6 +37,16 @@ pub struct TruthEllipse {
     pub theta: f64,
 }
 
+/// `FrameTruth::ned_frame` of the simulator's own world NED.
+pub const NED_FRAME_SCENARIO: &str = "scenario";
+/// `FrameTruth::ned_frame` when a closed loop put the truth in the
+/// autopilot's local NED (origin at its EKF origin).
+pub const NED_FRAME_AUTOPILOT: &str = "autopilot";
+
+fn scenario_ned_frame() -> String {
+    NED_FRAME_SCENARIO.into()
+}
+
 /// Truth of one frame, in the field names and conventions of the reference
 /// data's `truth.jsonl`, plus body, NED and time.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -72,11 +82,16 @@ pub struct FrameTruth {
     pub position_body: [f64; 3],
     /// Drogue normal, body FRD.
     pub normal_body: [f64; 3],
-    /// Inner circle centre, local NED, metres.
+    /// The frame of `position_ned`, `receiver_position_ned` and
+    /// `receiver_q_ned_body`: [`NED_FRAME_SCENARIO`] (the scenario's world)
+    /// or [`NED_FRAME_AUTOPILOT`] (SITL closed loop: the autopilot's local NED).
+    #[serde(default = "scenario_ned_frame")]
+    pub ned_frame: String,
+    /// Inner circle centre, local NED (`ned_frame`), metres.
     pub position_ned: [f64; 3],
-    /// Receiver (body origin) position, local NED, metres.
+    /// Receiver (body origin) position, local NED (`ned_frame`), metres.
     pub receiver_position_ned: [f64; 3],
-    /// Receiver attitude body → NED, Hamilton quaternion w, x, y, z.
+    /// Receiver attitude body → NED (`ned_frame`), Hamilton quaternion w, x, y, z.
     pub receiver_q_ned_body: [f64; 4],
     /// Capture time (mid-exposure), ns since the Unix epoch.
     pub capture_time_ns: u64,

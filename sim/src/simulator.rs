@@ -312,6 +312,7 @@ impl Simulator {
             rim_fully_in_image: in_image == RIM_POINTS,
             position_body: to_array(&position_body),
             normal_body: to_array(&normal_body),
+            ned_frame: crate::NED_FRAME_SCENARIO.into(),
             position_ned: to_array(&st.drogue_ned),
             receiver_position_ned: to_array(&st.receiver_ned),
             receiver_q_ned_body: quat_from_matrix(&st.r_ned_body),

@@ -157,3 +157,32 @@ fn supplied_receiver_pose_is_followed() {
     sim.set_receiver_pose([f64::NAN, 0.0, 0.0], [0.0; 4]);
     assert!(sim.next_truth().is_some());
 }
+
+#[test]
+fn probe_kept_between_frames_is_redrawn_when_it_moves() {
+    // A run renders the probe once and keeps it: frame 170 after 169 others
+    // must equal frame 170 from a fresh simulator.
+    let scenario = Scenario::builtin("contact").unwrap();
+    let mut run = Simulator::new(scenario.clone()).unwrap();
+    let from_run = run.nth(170).unwrap();
+    let from_fresh = frame_at(scenario.clone(), 170);
+    assert!(from_run == from_fresh, "frame 170 differs after a run");
+    // The same scene with the probe moved (and then without a probe) on a
+    // renderer that has drawn the old probe, against a fresh renderer.
+    let scene = run.last_scene().unwrap().clone();
+    let mut moved = scene.clone();
+    if let Some(p) = moved.probe.as_mut() {
+        p.a.x += 0.05;
+        p.radius_b *= 1.5;
+    }
+    let mut none = scene.clone();
+    none.probe = None;
+    for changed in [moved, none] {
+        let kept = run.render_scene(&changed);
+        let fresh = Simulator::new(scenario.clone())
+            .unwrap()
+            .render_scene(&changed);
+        assert!(kept == fresh, "a stale probe was drawn");
+        assert!(kept != run.render_scene(&scene), "the probe change shows");
+    }
+}

@@ -4,4 +4,5 @@ pub mod process;
 pub mod recover;
 pub mod review;
 pub mod run;
+pub mod run_stats;
 pub mod sim;

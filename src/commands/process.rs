@@ -5,13 +5,16 @@ use crate::camera::CameraModel;
 use crate::config::Config;
 use crate::frame::{Frame, FrameOrigin};
 use crate::image_io::read_gray8;
+use crate::log::FlightLog;
 use crate::log::replay::{self, ReplayReader};
 use crate::measure::Measurer;
+use crate::measure::mount::Mount;
 use crate::record::DetectionRecord;
 use crate::source::dir::list_images;
 use indicatif::{ProgressBar, ProgressStyle};
 use std::io::{BufWriter, Write};
 use std::path::PathBuf;
+use std::sync::Arc;
 use std::time::Instant;
 
 /// Frame period assumed for a folder of images (their capture times are not
@@ -22,7 +25,7 @@ const FOLDER_FRAME_PERIOD_NS: u64 = 33_333_333;
 #[derive(Clone, Debug, clap::Args)]
 #[command(
     after_help = "Exit status: 0 every frame was processed (unreadable frames are \
-records with `error`); 1 the output could not be written; 2 bad arguments, config, camera \
+records with `error`); 1 the output (JSON lines or --log) could not be written; 2 bad arguments, config, camera \
 file or input."
 )]
 pub struct ProcessArgs {
@@ -45,6 +48,10 @@ pub struct ProcessArgs {
     /// temporal disambiguation.
     #[arg(long)]
     pub independent: bool,
+    /// Also write an MCAP log of the frames and measurements (the topics of
+    /// `run`'s log, for Foxglove), to exactly this file.
+    #[arg(long)]
+    pub log: Option<PathBuf>,
 }
 
 /// What a `process` run did (printed on stderr at the end).
@@ -57,6 +64,8 @@ pub struct ProcessSummary {
     pub skipped: usize,
     /// Mean measurement time per readable frame, milliseconds.
     pub ms_per_frame: f64,
+    /// The MCAP log written (`--log`).
+    pub log_file: Option<PathBuf>,
 }
 
 /// Why `process` stopped.
@@ -65,7 +74,7 @@ pub enum ProcessError {
     /// Arguments, config, camera or input unusable: nothing was processed.
     #[error("{0}")]
     Setup(String),
-    /// The output could not be written.
+    /// The output (JSON lines or the MCAP log) could not be written.
     #[error("writing {path}: {message}")]
     Output { path: String, message: String },
 }
@@ -153,6 +162,18 @@ pub fn run(args: &ProcessArgs) -> Result<ProcessSummary, ProcessError> {
         config.drogue.inner_radius_m = r;
     }
     let (frames, camera, skipped, total) = open_input(args)?;
+    let mount = Mount::from_config(&config.mount).map_err(setup)?;
+    let log = match &args.log {
+        Some(path) => Some(
+            FlightLog::start_file(&config.log, path, &camera).map_err(|e| {
+                ProcessError::Output {
+                    path: path.display().to_string(),
+                    message: e.to_string(),
+                }
+            })?,
+        ),
+        None => None,
+    };
     let mut measurer = Measurer::new(camera, &config).map_err(|e| setup(e.to_string()))?;
 
     let out_err = |e: std::io::Error| ProcessError::Output {
@@ -181,7 +202,13 @@ pub fn run(args: &ProcessArgs) -> Result<ProcessSummary, ProcessError> {
                 let m = measurer.measure(&frame);
                 measure_time += t.elapsed();
                 summary.detected += usize::from(m.detection.is_some());
-                DetectionRecord::from_measurement(name, &m)
+                let record = DetectionRecord::from_measurement(name, &m);
+                if let Some(log) = &log {
+                    log.frame(Arc::new(frame));
+                    let json = serde_json::to_value(&record).unwrap_or_default();
+                    log.measurement(Arc::new(m), json, &mount);
+                }
+                record
             }
         };
         summary.frames += 1;
@@ -194,6 +221,19 @@ pub fn run(args: &ProcessArgs) -> Result<ProcessSummary, ProcessError> {
     }
     out.flush().map_err(out_err)?;
     bar.finish_and_clear();
+    if let (Some(log), Some(path)) = (log, &args.log) {
+        let written = log.finish().map_err(|e| ProcessError::Output {
+            path: path.display().to_string(),
+            message: e.to_string(),
+        })?;
+        if written.dropped_write_error > 0 {
+            return Err(ProcessError::Output {
+                path: path.display().to_string(),
+                message: format!("{} items could not be written", written.dropped_write_error),
+            });
+        }
+        summary.log_file = written.files.first().cloned();
+    }
     let readable = summary.frames - summary.unreadable;
     if readable > 0 {
         summary.ms_per_frame = measure_time.as_secs_f64() * 1e3 / readable as f64;

@@ -2,18 +2,20 @@
 //! (latest-wins) and log (every frame), with bounded queues so that nothing
 //! waits on the log and the link always gets the newest measurement.
 
+use super::run_stats::{PipelineMeters, ResourceSummary, StatsThread};
 use crate::camera::CameraModel;
-use crate::config::Config;
+use crate::config::{Config, SitlAnchor, VehiclePoseSource};
 use crate::frame::Frame;
-use crate::link::{Link, LinkHandle};
+use crate::link::{Link, LinkHandle, VehiclePose};
+use crate::log::review::Histogram;
 use crate::log::{FlightLog, LogHandle};
 use crate::measure::Measurer;
 use crate::measure::mount::Mount;
 use crate::record::DetectionRecord;
 use crate::source::dir::{DirSource, unix_now_ns};
 use crate::source::mcap::McapSource;
-use crate::source::sim::SimSource;
-use crate::source::{FrameSource, SourceSpec};
+use crate::source::sim::{AutopilotAnchor, SimSource};
+use crate::source::{FrameSource, SourceItem, SourceSpec};
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc::{SyncSender, TrySendError, sync_channel};
@@ -26,7 +28,8 @@ use std::time::{Duration, Instant};
     after_help = "With no arguments: the simulated `approach` scenario, MAVLink to \
 udpout:127.0.0.1:14550, MCAP to logs/. Ctrl-C (SIGINT) or SIGTERM ends the run cleanly. \
 Exit status: 0 the run ended (source finished, --max-frames, or a signal); 2 bad arguments, \
-config, camera or source; 1 a failure while running."
+config, camera or source; 1 a failure while running, including --vehicle-pose mavlink without \
+a pose from the autopilot within [run] vehicle_pose_timeout_s."
 )]
 pub struct RunArgs {
     /// Config file laid over the embedded default.
@@ -50,6 +53,11 @@ pub struct RunArgs {
     /// Run as fast as the pipeline goes instead of at the source's frame rate.
     #[arg(long)]
     pub fast: bool,
+    /// Who flies a sim: source's receiver: `script` (the scenario) or
+    /// `mavlink` (SITL closed loop: the autopilot's reported pose).
+    /// Default from `[run] vehicle_pose`.
+    #[arg(long, value_enum)]
+    pub vehicle_pose: Option<VehiclePoseSource>,
 }
 
 /// Why `run` stopped with an error.
@@ -79,7 +87,288 @@ pub struct RunSummary {
     /// Log items lost (queue full or write errors).
     pub log_dropped: u64,
     pub link: Option<crate::link::LinkStats>,
+    /// Closed loop: frames rendered with a held pose (the autopilot's was stale).
+    pub vehicle_pose_held: u64,
     pub interrupted: bool,
+    /// CPU, memory and queues (the `/drogue/stats` figures).
+    pub resources: ResourceSummary,
+    /// Capture to first pose message sent, ms.
+    pub latency_ms: Histogram,
+}
+
+/// Where the run's frames come from: any source, or the simulator flown by
+/// the autopilot (SITL closed loop).
+enum Frames {
+    Source(Box<dyn FrameSource>),
+    ClosedLoop(Box<ClosedLoop>),
+}
+
+impl Frames {
+    fn source(&self) -> &dyn FrameSource {
+        match self {
+            Frames::Source(s) => s.as_ref(),
+            Frames::ClosedLoop(c) => &c.sim,
+        }
+    }
+}
+
+/// Opens the frames for `vehicle_pose`: the closed loop needs a `sim:`
+/// source on the wall clock.
+fn open_frames(
+    spec: &SourceSpec,
+    vehicle_pose: VehiclePoseSource,
+    args: &RunArgs,
+    config: &Config,
+) -> Result<Frames, RunError> {
+    match (vehicle_pose, spec) {
+        (VehiclePoseSource::Script, _) => Ok(Frames::Source(open_source(spec, config)?)),
+        (VehiclePoseSource::Mavlink, SourceSpec::Sim(name)) => {
+            if args.fast {
+                return Err(RunError::Setup(
+                    "--vehicle-pose mavlink runs on the wall clock (the autopilot's time): drop --fast"
+                        .into(),
+                ));
+            }
+            let timeout = config.run.vehicle_pose_timeout_s;
+            if !(timeout.is_finite() && timeout > 0.0) {
+                return Err(RunError::Setup(format!(
+                    "[run] vehicle_pose_timeout_s = {timeout} must be > 0"
+                )));
+            }
+            let (delay, max_age) = (config.run.vehicle_pose_delay_ms, config.link.max_age_ms);
+            if max_age > 0 && delay >= max_age {
+                return Err(RunError::Setup(format!(
+                    "[run] vehicle_pose_delay_ms = {delay} must be below [link] max_age_ms = \
+                     {max_age}: every frame would be too old to send"
+                )));
+            }
+            let sim = SimSource::open(name).map_err(|e| RunError::Setup(e.to_string()))?;
+            Ok(Frames::ClosedLoop(Box::new(ClosedLoop {
+                sim,
+                mode: config.run.sitl_anchor,
+                anchor: None,
+                held: None,
+                stale: false,
+                held_frames: 0,
+                dropped: 0,
+            })))
+        }
+        (VehiclePoseSource::Mavlink, _) => Err(RunError::Setup(
+            "--vehicle-pose mavlink needs a simulated source (--source sim:SCENARIO)".into(),
+        )),
+    }
+}
+
+/// SITL closed loop (`--vehicle-pose mavlink`): each frame is rendered with
+/// the receiver at the pose the autopilot reports on the link
+/// (LOCAL_POSITION_NED + ATTITUDE) for the frame's capture time, while the
+/// drogue flies its own trajectory. The autopilot's local NED is placed in
+/// the scenario's world at its first pose ([`AutopilotAnchor`]).
+struct ClosedLoop {
+    sim: SimSource,
+    mode: SitlAnchor,
+    anchor: Option<AutopilotAnchor>,
+    /// The last pose used: held while the autopilot's is stale.
+    held: Option<VehiclePose>,
+    stale: bool,
+    held_frames: u64,
+    /// Frames dropped because the rendering fell behind.
+    dropped: u64,
+}
+
+impl ClosedLoop {
+    /// The next frame on the wall clock, captured `delay_ns` before it is
+    /// rendered, from the autopilot's pose at the capture (or the last one
+    /// while it is stale). Frames the run is too late for are dropped, as a
+    /// camera drops them: the scenario's clock stays on the autopilot's.
+    fn next_frame(
+        &mut self,
+        link: &LinkHandle,
+        pacer: &mut Pacer,
+        delay_ns: u64,
+    ) -> Option<SourceItem> {
+        let due_ns = loop {
+            match pacer.wait_until_due_or_drop(self.sim.next_frame_time_ns()) {
+                Some(due) => break due,
+                None => {
+                    self.sim.skip_frame()?;
+                    self.dropped += 1;
+                    pacer.late += 1;
+                    if self.dropped.is_power_of_two() {
+                        tracing::warn!(
+                            dropped = self.dropped,
+                            "closed loop: rendering behind the frame rate, frames dropped"
+                        );
+                    }
+                }
+            }
+        };
+        let capture_time_ns = due_ns.saturating_sub(delay_ns);
+        let pose = match (link.vehicle_pose_at(capture_time_ns), self.held) {
+            (Some(p), _) => {
+                if self.stale {
+                    self.stale = false;
+                    tracing::info!("closed loop: the autopilot's pose is back");
+                }
+                p
+            }
+            (None, Some(held)) => {
+                if !self.stale {
+                    self.stale = true;
+                    tracing::warn!(
+                        "closed loop: the autopilot's pose is stale (no LOCAL_POSITION_NED + \
+                         ATTITUDE near the capture time): holding the last one"
+                    );
+                }
+                self.held_frames += 1;
+                held
+            }
+            (None, None) => {
+                return Some(Err(
+                    "closed loop: no pose from the autopilot for this frame".into(),
+                ));
+            }
+        };
+        self.held = Some(pose);
+        if self.anchor.is_none() {
+            self.anchor = self.anchor_at(&pose);
+        }
+        let Some(anchor) = &self.anchor else {
+            return Some(Err(
+                "closed loop: the autopilot's first pose cannot be placed in the scenario".into(),
+            ));
+        };
+        self.sim.next_frame_from_autopilot(
+            anchor,
+            pose.position_ned_m,
+            pose.q_ned_body,
+            capture_time_ns,
+        )
+    }
+
+    /// Places the autopilot's local NED in the scenario's world at its first
+    /// pose, and says so (tracing, MCAP `/log`): it holds for the whole run.
+    fn anchor_at(&self, pose: &VehiclePose) -> Option<AutopilotAnchor> {
+        let anchor = AutopilotAnchor::new(
+            self.sim.simulator().scenario(),
+            self.mode,
+            pose.position_ned_m,
+            pose.q_ned_body,
+        )?;
+        tracing::info!(
+            mode = ?self.mode,
+            yaw_world_autopilot_deg = anchor.yaw_world_autopilot_rad.to_degrees(),
+            origin_autopilot_m = ?anchor.origin_autopilot_m,
+            origin_world_m = ?anchor.origin_world_m,
+            velocity_world_mps = ?anchor.velocity_world_mps,
+            "closed loop: the autopilot's local NED placed in the scenario's world \
+             (world = R_yaw (p - origin_autopilot) + origin_world + velocity t); \
+             /sim/truth NED fields are in the autopilot's frame"
+        );
+        Some(anchor)
+    }
+}
+
+/// Waits until the autopilot's pose is on the link (the link keeps
+/// heartbeating meanwhile), then `delay` more, so that the first frame's
+/// capture time (`delay` before it is rendered) comes after the first
+/// report. `Ok(false)`: a signal ended the wait.
+fn wait_for_autopilot_pose(
+    link: &LinkHandle,
+    timeout_s: f64,
+    delay: Duration,
+    stop: &AtomicBool,
+) -> Result<bool, RunError> {
+    let deadline = Instant::now() + Duration::from_secs_f64(timeout_s);
+    let mut said = false;
+    loop {
+        if link.vehicle_pose_at(unix_now_ns()).is_some() {
+            if said {
+                tracing::info!("closed loop: the autopilot's pose arrived");
+            }
+            std::thread::sleep(delay);
+            return Ok(!stop.load(Ordering::SeqCst));
+        }
+        if stop.load(Ordering::SeqCst) {
+            return Ok(false);
+        }
+        if Instant::now() > deadline {
+            return Err(RunError::Runtime(format!(
+                "no pose from the autopilot within {timeout_s} s: stream LOCAL_POSITION_NED and \
+                 ATTITUDE on the MAVLink link (see README, SITL docking)"
+            )));
+        }
+        if !said {
+            said = true;
+            tracing::info!(
+                "waiting for the autopilot's pose (LOCAL_POSITION_NED + ATTITUDE on the link)"
+            );
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+/// Replays a source's timeline on the wall clock: a frame's capture time
+/// becomes the run's start plus its time on the timeline (exact, so truth
+/// and messages line up). A source that falls more than [`MAX_SOURCE_LAG`]
+/// behind (a simulator on a busy machine) is re-anchored, like a camera
+/// dropping frames; otherwise its frames would all arrive stale.
+struct Pacer {
+    started: Instant,
+    started_ns: u64,
+    lag: Duration,
+    first_ns: Option<u64>,
+    /// Times the source fell behind and was re-anchored.
+    late: u64,
+}
+
+const MAX_SOURCE_LAG: Duration = Duration::from_millis(100);
+
+impl Pacer {
+    fn start() -> Self {
+        Self {
+            started: Instant::now(),
+            started_ns: unix_now_ns(),
+            lag: Duration::ZERO,
+            first_ns: None,
+            late: 0,
+        }
+    }
+
+    /// Sleeps until the frame at `timeline_ns` (the source's clock) is due;
+    /// returns its capture time, ns since the Unix epoch.
+    fn wait_until_due(&mut self, timeline_ns: u64, seq: u64) -> u64 {
+        let first = *self.first_ns.get_or_insert(timeline_ns);
+        let offset = Duration::from_nanos(timeline_ns.saturating_sub(first));
+        let now = Instant::now();
+        let due = self.started + offset + self.lag;
+        if now > due + MAX_SOURCE_LAG {
+            self.lag += now - due;
+            self.late += 1;
+            tracing::warn!(seq, "source behind its frame rate: timeline moved on");
+        } else if let Some(wait) = due.checked_duration_since(now) {
+            std::thread::sleep(wait);
+        }
+        self.started_ns + (offset + self.lag).as_nanos() as u64
+    }
+
+    /// Like [`Pacer::wait_until_due`] but the timeline never moves: `None`
+    /// when the frame is more than [`MAX_SOURCE_LAG`] late (the caller drops
+    /// it). For the closed loop, whose scenario clock must stay on the
+    /// autopilot's (wall) clock.
+    fn wait_until_due_or_drop(&mut self, timeline_ns: u64) -> Option<u64> {
+        let first = *self.first_ns.get_or_insert(timeline_ns);
+        let offset = Duration::from_nanos(timeline_ns.saturating_sub(first));
+        let now = Instant::now();
+        let due = self.started + offset;
+        if now > due + MAX_SOURCE_LAG {
+            return None;
+        }
+        if let Some(wait) = due.checked_duration_since(now) {
+            std::thread::sleep(wait);
+        }
+        Some(self.started_ns + offset.as_nanos() as u64)
+    }
 }
 
 fn open_source(spec: &SourceSpec, config: &Config) -> Result<Box<dyn FrameSource>, RunError> {
@@ -149,6 +438,7 @@ fn spawn_measurement(
     link: LinkHandle,
     log: LogHandle,
     counts: Arc<Mutex<RunSummary>>,
+    meters: Arc<PipelineMeters>,
 ) -> (SyncSender<Arc<Frame>>, std::thread::JoinHandle<()>) {
     // Capacity 1: at most one frame waits; a newer one finding it full is
     // skipped for measurement (still logged), so latency never builds up.
@@ -170,6 +460,7 @@ fn spawn_measurement(
                 c.detected += u64::from(m.detection.is_some());
             }
             log.measurement(m, record, &mount);
+            meters.frame_measured();
         }
     });
     (tx, handle)
@@ -188,10 +479,11 @@ pub fn run(
     let spec: SourceSpec = spec_text
         .parse()
         .map_err(|e: crate::source::SourceError| RunError::Setup(e.to_string()))?;
-    let mut source = open_source(&spec, &config)?;
-    let camera = choose_camera(source.as_ref(), args, &config)?;
+    let vehicle_pose = args.vehicle_pose.unwrap_or(config.run.vehicle_pose);
+    let mut frames_in = open_frames(&spec, vehicle_pose, args, &config)?;
+    let camera = choose_camera(frames_in.source(), args, &config)?;
     let mut config = config;
-    if let Some(m) = source.mount() {
+    if let Some(m) = frames_in.source().mount() {
         config.mount = m;
     }
     let mount = Mount::from_config(&config.mount).map_err(RunError::Setup)?;
@@ -216,27 +508,42 @@ pub fn run(
         source = %spec_text,
         mavlink = %args.mavlink.as_deref().unwrap_or(&config.link.connection),
         camera = %camera.name,
+        vehicle_pose = ?vehicle_pose,
         "run started"
     );
 
     let stop = Arc::new(AtomicBool::new(false));
     watch_signals(&rt, Arc::clone(&stop));
 
-    // Link events (sent and received messages) go to the log.
+    // Link events (sent and received messages) go to the log; the capture →
+    // send latency of each frame's first pose message is counted on the way.
     let events = link.events();
     let event_log = log.clone();
     let events_done = Arc::new(AtomicBool::new(false));
     let events_done_flag = Arc::clone(&events_done);
     let event_thread = std::thread::spawn(move || {
+        let mut latency_ms = Histogram::default();
+        let mut last_sent_capture = None;
         loop {
             match events.recv_timeout(Duration::from_millis(100)) {
-                Some(ev) => event_log.mavlink(ev),
+                Some(ev) => {
+                    if let (true, Some(captured)) = (ev.outgoing, ev.capture_time_ns)
+                        && last_sent_capture != Some(captured)
+                    {
+                        last_sent_capture = Some(captured);
+                        latency_ms.add(ev.time_ns.saturating_sub(captured) as f64 * 1e-6);
+                    }
+                    event_log.mavlink(ev);
+                }
                 None if events_done_flag.load(Ordering::SeqCst) => break,
                 None => {}
             }
         }
+        latency_ms
     });
 
+    let meters = Arc::new(PipelineMeters::default());
+    let stats_thread = StatsThread::spawn(Arc::clone(&meters), log.clone(), link.events());
     let counts = Arc::new(Mutex::new(RunSummary::default()));
     let (frame_tx, measure_thread) = spawn_measurement(
         measurer,
@@ -244,27 +551,47 @@ pub fn run(
         link.clone(),
         log.clone(),
         Arc::clone(&counts),
+        Arc::clone(&meters),
     );
 
     // Sources with a timeline (sim, log) are replayed at its pace unless
-    // --fast, on the wall clock: a frame's capture time becomes the run's
-    // start plus its time on the source's timeline (exact, so truth and
-    // messages line up). A source that falls more than MAX_SOURCE_LAG behind
-    // (a simulator on a busy machine) is re-anchored, like a camera dropping
-    // frames; otherwise its frames would all arrive stale.
-    const MAX_SOURCE_LAG: Duration = Duration::from_millis(100);
-    let paced = source.recorded_timeline() && !args.fast;
-    let started = Instant::now();
-    let started_ns = unix_now_ns();
-    let mut lag = Duration::ZERO;
-    let mut first_capture_ns: Option<u64> = None;
+    // --fast (see Pacer). The closed loop first waits for the autopilot.
+    let mut failure = None;
+    let go = match &frames_in {
+        Frames::ClosedLoop(_) => wait_for_autopilot_pose(
+            &link,
+            config.run.vehicle_pose_timeout_s,
+            Duration::from_millis(config.run.vehicle_pose_delay_ms),
+            &stop,
+        )
+        .unwrap_or_else(|e| {
+            tracing::error!("{e}");
+            failure = Some(e);
+            false
+        }),
+        Frames::Source(_) => true,
+    };
+    let paced = frames_in.source().recorded_timeline() && !args.fast;
+    let mut pacer = Pacer::start();
     let max_frames = args.max_frames.unwrap_or(u64::MAX);
-    let (mut frames, mut skipped, mut unreadable, mut late) = (0u64, 0u64, 0u64, 0u64);
-    while frames < max_frames && !stop.load(Ordering::SeqCst) {
-        let Some(item) = source.next_frame() else {
+    let (mut frames, mut skipped, mut unreadable) = (0u64, 0u64, 0u64);
+    while go && frames < max_frames && !stop.load(Ordering::SeqCst) {
+        // The source's own CPU (rendering, decoding) is counted apart from
+        // the pipeline's.
+        let item = meters.time_source(|| match &mut frames_in {
+            Frames::Source(source) => source.next_frame(),
+            // Rendered [run] vehicle_pose_delay_ms after its capture, from
+            // the autopilot's pose at the capture.
+            Frames::ClosedLoop(cl) => {
+                let delay_ns = config.run.vehicle_pose_delay_ms.saturating_mul(1_000_000);
+                cl.next_frame(&link, &mut pacer, delay_ns)
+            }
+        });
+        let Some(item) = item else {
             break;
         };
         frames += 1;
+        meters.frames_in.fetch_add(1, Ordering::Relaxed);
         let mut frame = match item {
             Ok(f) => f,
             Err(e) => {
@@ -273,22 +600,8 @@ pub fn run(
                 continue;
             }
         };
-        if paced {
-            let first = *first_capture_ns.get_or_insert(frame.capture_time_ns);
-            let offset = Duration::from_nanos(frame.capture_time_ns.saturating_sub(first));
-            let now = Instant::now();
-            let due = started + offset + lag;
-            if now > due + MAX_SOURCE_LAG {
-                lag += now - due;
-                late += 1;
-                tracing::warn!(
-                    seq = frame.seq,
-                    "source behind its frame rate: timeline moved on"
-                );
-            } else if let Some(wait) = due.checked_duration_since(now) {
-                std::thread::sleep(wait);
-            }
-            frame.capture_time_ns = started_ns + (offset + lag).as_nanos() as u64;
+        if paced && matches!(frames_in, Frames::Source(_)) {
+            frame.capture_time_ns = pacer.wait_until_due(frame.capture_time_ns, frame.seq);
         }
         let frame = Arc::new(frame);
         log.frame(Arc::clone(&frame));
@@ -304,6 +617,7 @@ pub fn run(
             Ok(()) => {}
             Err(TrySendError::Full(f)) => {
                 skipped += 1;
+                meters.skipped.fetch_add(1, Ordering::Relaxed);
                 tracing::debug!(seq = f.seq, "measurement busy: frame skipped");
             }
             Err(TrySendError::Disconnected(_)) => {
@@ -311,17 +625,24 @@ pub fn run(
             }
         }
     }
+    let late = pacer.late;
+    let vehicle_pose_held = match &frames_in {
+        Frames::ClosedLoop(cl) => cl.held_frames,
+        Frames::Source(_) => 0,
+    };
     drop(frame_tx);
     let _ = measure_thread.join();
     link.shutdown();
     events_done.store(true, Ordering::SeqCst);
-    let _ = event_thread.join();
+    let latency_ms = event_thread.join().unwrap_or_default();
+    let resources = stats_thread.finish();
     let link_stats = link.stats();
     tracing::info!(
         frames,
         skipped,
         unreadable,
         late,
+        vehicle_pose_held,
         interrupted = stop.load(Ordering::SeqCst),
         "run finished"
     );
@@ -333,12 +654,18 @@ pub fn run(
     summary.skipped = skipped;
     summary.unreadable = unreadable;
     summary.source_late = late;
+    summary.vehicle_pose_held = vehicle_pose_held;
     summary.interrupted = stop.load(Ordering::SeqCst);
     summary.log_files = log_summary.files;
     summary.link = Some(link_stats);
+    summary.resources = resources;
+    summary.latency_ms = latency_ms;
     summary.log_dropped = log_summary.dropped_queue_full + log_summary.dropped_write_error;
     if skipped > 0 {
         tracing::warn!("{skipped} frames were not measured (measurement busy)");
+    }
+    if let Some(e) = failure {
+        return Err(e);
     }
     Ok(summary)
 }
@@ -366,9 +693,38 @@ impl RunSummary {
                 l.reconnects
             )
         });
+        let held = if self.vehicle_pose_held > 0 {
+            format!(
+                ", {} rendered with a held autopilot pose (stale)",
+                self.vehicle_pose_held
+            )
+        } else {
+            String::new()
+        };
+        let latency = if self.latency_ms.count() == 0 {
+            "no pose sent".to_string()
+        } else {
+            format!(
+                "p50 {:.2}  p95 {:.2}  p99 {:.2}  max {:.2} ms over {} poses",
+                self.latency_ms.quantile(0.50),
+                self.latency_ms.quantile(0.95),
+                self.latency_ms.quantile(0.99),
+                self.latency_ms.max(),
+                self.latency_ms.count()
+            )
+        };
+        let r = &self.resources;
+        let resources_line = format!(
+            "\ncapture → send: {latency}\nresources: pipeline CPU {:.1} % of one core (source {:.1} % \
+             besides), peak resident memory {:.1} MB, log queue at most {} items",
+            r.pipeline_cpu_pct,
+            r.source_cpu_pct,
+            r.peak_rss_bytes as f64 / 1e6,
+            r.max_log_queue
+        );
         format!(
             "run {}: {} frames, {} measured, {} detected ({rate:.1} %), {} skipped (measurement busy), \
-             {} unreadable, source late {} times{}\nlog: {}",
+             {} unreadable, source late {} times{held}{}{resources_line}\nlog: {}",
             if self.interrupted {
                 "interrupted"
             } else {

@@ -11,7 +11,8 @@ use std::time::Duration;
 /// One MAVLink message sent or received, decoded.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct LinkEvent {
-    /// When it was written to / read from the transport, ns since the Unix epoch.
+    /// When the write to the transport started / the read returned, ns since
+    /// the Unix epoch.
     pub time_ns: u64,
     /// Sent by us (`/mavlink/out`) or received (`/mavlink/in`).
     pub outgoing: bool,
@@ -93,6 +94,15 @@ impl EventReceiver {
     /// Events dropped so far because this consumer was too slow.
     pub fn dropped(&self) -> u64 {
         self.0.dropped.load(Ordering::Relaxed)
+    }
+
+    /// Events waiting now (for the run's queue statistics).
+    pub fn len(&self) -> usize {
+        lock(&self.0.events).len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
     }
 }
 

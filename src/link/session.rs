@@ -380,11 +380,15 @@ impl Connection {
         let raw = self.encoder.encode(message, self.signing.as_ref());
         let limit = Duration::from_millis(self.ctx.settings.cfg.write_timeout_ms);
         let datagram = transport.is_datagram();
+        // Stamped as the write starts: a stamp taken after it returns could
+        // land after the peer already has the message (a busy machine may
+        // preempt this thread right after the system call).
+        let write_started_ns = unix_now_ns();
         match timeout(limit, transport.write(raw.raw_bytes())).await {
             Ok(Ok(true)) => {
                 self.ctx.counters.count_sent(message.message_name());
                 self.ctx.events.push(LinkEvent {
-                    time_ns: unix_now_ns(),
+                    time_ns: write_started_ns,
                     outgoing: true,
                     name: message.message_name().to_string(),
                     capture_time_ns,

@@ -14,6 +14,7 @@ mod layer;
 pub mod recover;
 pub mod replay;
 pub mod review;
+mod send_stamps;
 
 pub mod storage;
 pub mod topics;
@@ -192,6 +193,8 @@ pub(crate) enum Item {
     Measurement(Box<MeasurementItem>),
     Link(Box<LinkEvent>),
     Log(Box<LogEvent>),
+    /// A `/drogue/stats` record (the run's resource figures).
+    Stats(Box<serde_json::Value>),
     /// Flush, write the summary, close, and reply.
     Finish(mpsc::Sender<LogSummary>),
 }
@@ -200,10 +203,15 @@ pub(crate) enum Item {
 #[derive(Debug, Default)]
 pub(crate) struct Counters {
     pub dropped_queue_full: AtomicU64,
+    /// Items in the queue now (pushed, not yet taken by the writer).
+    pub queued: AtomicU64,
 }
 
 struct Shared {
     tx: SyncSender<Item>,
+    /// Wait for room instead of dropping (offline `process --log`: nothing
+    /// is live, and nothing may be lost).
+    blocking: bool,
     counters: Arc<Counters>,
     thread: Mutex<Option<JoinHandle<LogSummary>>>,
 }
@@ -226,6 +234,36 @@ impl FlightLog {
         Self::start_with_storage(cfg, dir, camera, Box::new(FileStorage))
     }
 
+    /// An offline log written to exactly `path` (`process --log OUT.mcap`):
+    /// no recovery of other files, no rotation, and a handle that waits for
+    /// room in the queue instead of dropping, since nothing here is live.
+    pub fn start_file(
+        cfg: &LogConfig,
+        path: &Path,
+        camera: &CameraModel,
+    ) -> Result<LogHandle, LogError> {
+        let mut cfg = cfg.clone();
+        cfg.rotate_size_mib = 0;
+        cfg.rotate_duration_s = 0;
+        cfg.recover_on_start = false;
+        cfg.validate()?;
+        if let Some(parent) = path.parent().filter(|p| !p.as_os_str().is_empty()) {
+            std::fs::create_dir_all(parent).map_err(|e| LogError::io(parent, e))?;
+        }
+        let dir = path.parent().unwrap_or(Path::new("")).to_path_buf();
+        let mut w = writer::Writer::new(
+            cfg.clone(),
+            dir,
+            String::new(),
+            camera.clone(),
+            Box::new(FileStorage),
+            Arc::new(Counters::default()),
+            Vec::new(),
+        );
+        w.set_exact_path(path.to_path_buf());
+        Self::spawn(&cfg, w, true)
+    }
+
     /// [`FlightLog::start`] writing through `storage` (tests inject failing
     /// storage here: disk full, I/O errors).
     pub fn start_with_storage(
@@ -241,19 +279,28 @@ impl FlightLog {
             Vec::new()
         };
         let base = storage::run_base_name(dir, &cfg.file_prefix, storage::now_ns());
-        let counters = Arc::new(Counters::default());
-        let (tx, rx) = mpsc::sync_channel(cfg.queue_len);
-        let mut w = writer::Writer::new(
+        let w = writer::Writer::new(
             cfg.clone(),
             dir.to_path_buf(),
             base,
             camera.clone(),
             storage,
-            counters.clone(),
+            Arc::new(Counters::default()),
             recovered,
         );
-        // Open the first file now so a bad folder shows at start-up, not later.
+        Self::spawn(cfg, w, false)
+    }
+
+    /// Opens the writer's first file (so a bad folder shows at start-up, not
+    /// later) and starts its thread.
+    fn spawn(
+        cfg: &LogConfig,
+        mut w: writer::Writer,
+        blocking: bool,
+    ) -> Result<LogHandle, LogError> {
         w.open_first()?;
+        let counters = w.counters();
+        let (tx, rx) = mpsc::sync_channel(cfg.queue_len);
         let thread = std::thread::Builder::new()
             .name("mcap-log".into())
             .spawn(move || w.run(rx))
@@ -261,6 +308,7 @@ impl FlightLog {
         Ok(LogHandle {
             shared: Arc::new(Shared {
                 tx,
+                blocking,
                 counters,
                 thread: Mutex::new(Some(thread)),
             }),
@@ -271,15 +319,33 @@ impl FlightLog {
 impl LogHandle {
     /// Queues without waiting; a full queue drops the item and counts it.
     fn push(&self, item: Item) {
-        match self.shared.tx.try_send(item) {
-            Ok(()) => {}
-            Err(TrySendError::Full(_)) | Err(TrySendError::Disconnected(_)) => {
-                self.shared
-                    .counters
-                    .dropped_queue_full
-                    .fetch_add(1, Ordering::Relaxed);
+        let counters = &self.shared.counters;
+        // Counted before the send: the writer may take the item at once.
+        counters.queued.fetch_add(1, Ordering::Relaxed);
+        let sent = if self.shared.blocking {
+            self.shared.tx.send(item).is_ok()
+        } else {
+            match self.shared.tx.try_send(item) {
+                Ok(()) => true,
+                Err(TrySendError::Full(_)) | Err(TrySendError::Disconnected(_)) => false,
             }
+        };
+        if !sent {
+            counters.queued.fetch_sub(1, Ordering::Relaxed);
+            counters.dropped_queue_full.fetch_add(1, Ordering::Relaxed);
         }
+    }
+
+    /// Items waiting in the queue for the writer now (for the run's
+    /// statistics: a depth that keeps growing means the disk is too slow).
+    pub fn queue_depth(&self) -> u64 {
+        self.shared.counters.queued.load(Ordering::Relaxed)
+    }
+
+    /// `/drogue/stats`: the run's resource figures (CPU, memory, queues);
+    /// its `time_ns` field is the log time.
+    pub fn stats(&self, record: serde_json::Value) {
+        self.push(Item::Stats(Box::new(record)));
     }
 
     /// Items dropped so far because the queue was full.

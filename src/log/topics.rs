@@ -24,6 +24,8 @@ pub const MAVLINK_OUT: &str = "/mavlink/out";
 pub const MAVLINK_IN: &str = "/mavlink/in";
 pub const SIM_TRUTH: &str = "/sim/truth";
 pub const LOG: &str = "/log";
+/// JSON: the run's resource figures (CPU, memory, queue depths), every second.
+pub const STATS: &str = "/drogue/stats";
 
 /// frame_id of the camera frame (image, calibration, pose, transforms).
 pub const CAMERA_FRAME: &str = "camera";
@@ -68,6 +70,7 @@ pub fn channel_spec(topic: &str, image: ImageEncoding) -> Result<ChannelSpec, St
         DETECTION => Ok(json("drogue_vision.Detection")),
         MAVLINK_OUT | MAVLINK_IN => Ok(json("drogue_vision.MavlinkMessage")),
         SIM_TRUTH => Ok(json("drogue_vision.SimTruth")),
+        STATS => Ok(json("drogue_vision.RunStats")),
         other => Err(format!("unknown topic {other}")),
     }
 }

@@ -2,6 +2,7 @@
 //! syncs at least every `sync_interval_ms`, rotates by size and duration, and
 //! survives write errors (reported, counted, retried with a new file).
 
+use super::send_stamps::{ReadyRecord, SendStamps, stamp};
 use super::storage::{self, Storage, StorageFile};
 use super::topics::{self, ChannelSpec};
 use super::{Counters, Item, LogConfig, LogError, LogEvent, LogSummary, MeasurementItem};
@@ -61,6 +62,11 @@ pub(crate) struct Writer {
     /// Queue-full drops already reported, and when.
     reported_dropped: u64,
     last_drop_report: Option<Instant>,
+    /// Detection records waiting for their send stamp.
+    send_stamps: SendStamps,
+    /// The first file's exact path (`process --log OUT.mcap`); later parts
+    /// are `<stem>_<part>.mcap` beside it.
+    exact_path: Option<PathBuf>,
 }
 
 impl Writer {
@@ -91,12 +97,35 @@ impl Writer {
             pending_reports: Vec::new(),
             reported_dropped: 0,
             last_drop_report: None,
+            send_stamps: SendStamps::default(),
+            exact_path: None,
+        }
+    }
+
+    /// Writes the first file to exactly `path`.
+    pub(crate) fn set_exact_path(&mut self, path: PathBuf) {
+        self.base = path
+            .file_stem()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_else(|| "log".into());
+        self.exact_path = Some(path);
+    }
+
+    pub(crate) fn counters(&self) -> Arc<Counters> {
+        Arc::clone(&self.counters)
+    }
+
+    /// The next file's path.
+    fn next_path(&self) -> PathBuf {
+        match &self.exact_path {
+            Some(p) if self.next_part == 0 => p.clone(),
+            _ => storage::part_path(&self.dir, &self.base, self.next_part),
         }
     }
 
     /// Opens part 000; its failure stops the start-up (a bad log folder).
     pub(crate) fn open_first(&mut self) -> Result<(), LogError> {
-        let path = storage::part_path(&self.dir, &self.base, self.next_part);
+        let path = self.next_path();
         let file = self.open(&path).map_err(|e| LogError::io(&path, e))?;
         self.file = Some(file);
         Ok(())
@@ -138,14 +167,27 @@ impl Writer {
         let interval = Duration::from_millis(self.cfg.sync_interval_ms);
         let mut next_sync = Instant::now() + interval;
         loop {
-            let timeout = next_sync.saturating_duration_since(Instant::now());
+            let wake = self
+                .send_stamps
+                .next_deadline()
+                .map_or(next_sync, |d| d.min(next_sync));
+            let timeout = wake.saturating_duration_since(Instant::now());
             let item = match rx.recv_timeout(timeout) {
-                Ok(item) => Some(item),
+                Ok(item) => {
+                    self.counters
+                        .queued
+                        .fetch_sub(1, std::sync::atomic::Ordering::Relaxed);
+                    Some(item)
+                }
                 Err(RecvTimeoutError::Timeout) => None,
                 Err(RecvTimeoutError::Disconnected) => break,
             };
+            let expired = self.send_stamps.expired(Instant::now());
+            self.write_detections(expired);
             match item {
                 Some(Item::Finish(reply)) => {
+                    let held = self.send_stamps.drain();
+                    self.write_detections(held);
                     self.close();
                     let _ = reply.send(self.summary.clone());
                     return self.summary;
@@ -164,6 +206,8 @@ impl Writer {
             }
         }
         // Every handle is gone without finish(): still close the file cleanly.
+        let held = self.send_stamps.drain();
+        self.write_detections(held);
         self.close();
         self.summary
     }
@@ -174,6 +218,7 @@ impl Writer {
             Item::Measurement(m) => self.measurement(&m),
             Item::Link(e) => self.link(&e),
             Item::Log(e) => self.write_log_event(&e),
+            Item::Stats(record) => self.stats(&record),
             Item::Finish(_) => {}
         }
     }
@@ -204,12 +249,49 @@ impl Writer {
         let mut buf = std::mem::take(&mut self.buf);
         let ann = topics::annotations(m, &self.camera);
         self.write_proto(topics::ANNOTATIONS, seq, t, &ann, &mut buf);
-        self.write_json(topics::DETECTION, seq, t, t, &item.detection_json, &mut buf);
         if let Some(d) = &m.detection {
             self.write_proto(topics::POSE, seq, t, &topics::pose(d, t), &mut buf);
         }
         let tf = topics::transforms(m, &item.mount);
         self.write_proto(topics::TF, seq, t, &tf, &mut buf);
+        self.buf = buf;
+        let record = ReadyRecord {
+            seq,
+            capture_time_ns: t,
+            json: item.detection_json.clone(),
+        };
+        // Records with latency stamps (from `run`) of detected frames wait
+        // for their pose to be sent; the rest are complete now.
+        let stamped = record.json.get("latency_ns").is_some_and(|v| v.is_object());
+        let ready = match (stamped, m.detection.is_some()) {
+            (true, true) => self.send_stamps.hold(record, Instant::now()),
+            // No detection, no pose message.
+            (true, false) => vec![stamp(record, None)],
+            (false, _) => vec![record],
+        };
+        self.write_detections(ready);
+    }
+
+    /// `/drogue/detection` records, with `latency_ns.logged` stamped now.
+    fn write_detections(&mut self, records: Vec<ReadyRecord>) {
+        let mut buf = std::mem::take(&mut self.buf);
+        for mut r in records {
+            if let Some(latency) = r.json.get_mut("latency_ns").and_then(|v| v.as_object_mut()) {
+                latency.insert("logged".into(), storage::now_ns().into());
+            }
+            let t = r.capture_time_ns;
+            self.write_json(topics::DETECTION, r.seq, t, t, &r.json, &mut buf);
+        }
+        self.buf = buf;
+    }
+
+    fn stats(&mut self, record: &serde_json::Value) {
+        let t = record
+            .get("time_ns")
+            .and_then(|v| v.as_u64())
+            .unwrap_or_else(storage::now_ns);
+        let mut buf = std::mem::take(&mut self.buf);
+        self.write_json(topics::STATS, 0, t, t, record, &mut buf);
         self.buf = buf;
     }
 
@@ -225,6 +307,10 @@ impl Writer {
         let mut buf = std::mem::take(&mut self.buf);
         self.write_json(topic, 0, log_time, e.time_ns, e, &mut buf);
         self.buf = buf;
+        if let (true, Some(capture)) = (e.outgoing, e.capture_time_ns) {
+            let ready = self.send_stamps.sent(capture, e.time_ns);
+            self.write_detections(ready);
+        }
     }
 
     fn write_log_event(&mut self, e: &LogEvent) {
@@ -342,7 +428,7 @@ impl Writer {
         if self.retry_at.is_some_and(|t| Instant::now() < t) {
             return false;
         }
-        let path = storage::part_path(&self.dir, &self.base, self.next_part);
+        let path = self.next_path();
         match self.open(&path) {
             Ok(f) => {
                 self.file = Some(f);

@@ -91,6 +91,7 @@ pub fn truth(seq: u64) -> FrameTruth {
         rim_fully_in_image: true,
         position_body: [c.z, c.x, c.y],
         normal_body: [n.z, n.x, n.y],
+        ned_frame: drogue_sim::NED_FRAME_SCENARIO.into(),
         position_ned: [100.0, 0.0, -50.0],
         receiver_position_ned: [80.0, 0.0, -50.0],
         receiver_q_ned_body: [1.0, 0.0, 0.0, 0.0],

@@ -59,6 +59,49 @@ struct LinkLite {
     capture_time_ns: Option<u64>,
 }
 
+/// The fields of `/drogue/stats` the review reads.
+#[derive(Deserialize)]
+struct StatsLite {
+    time_ns: u64,
+    cpu_pct: CpuPctLite,
+    cpu_s_total: CpuTotalLite,
+    rss_bytes: Option<u64>,
+    queues: QueuesLite,
+}
+
+#[derive(Deserialize)]
+struct CpuPctLite {
+    pipeline: f64,
+}
+
+#[derive(Deserialize, Clone, Copy)]
+struct CpuTotalLite {
+    process: f64,
+    source: f64,
+}
+
+#[derive(Deserialize)]
+struct QueuesLite {
+    log: u64,
+    link_events: u64,
+}
+
+/// The run's resources, from its `/drogue/stats` records.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct ResourceReview {
+    pub samples: u64,
+    /// Pipeline CPU (process less the source) over the whole run, % of one core.
+    pub pipeline_cpu_pct: f64,
+    /// The busiest one-second interval, % of one core.
+    pub pipeline_cpu_max_pct: f64,
+    /// The source's own CPU (simulator rendering, camera decoding), % of one core.
+    pub source_cpu_pct: f64,
+    pub peak_rss_bytes: u64,
+    pub max_log_queue: u64,
+    pub last_log_queue: u64,
+    pub max_link_event_queue: u64,
+}
+
 /// One frame for the plots (NaN where there is no value).
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct PlotPoint {
@@ -104,6 +147,8 @@ pub struct ReviewReport {
     pub log_dropped: u64,
     pub truth_frames: u64,
     pub by_range: Vec<RangeBin>,
+    /// From `/drogue/stats` (logs of `run`).
+    pub resources: Option<ResourceReview>,
     pub files_written: Vec<PathBuf>,
     pub plot_error: Option<String>,
     #[doc(hidden)]
@@ -162,6 +207,7 @@ pub fn review(log: &Path, out_dir: &Path) -> Result<ReviewReport, LogError> {
     let mut stride = 1usize;
     let mut since_kept = 0usize;
     let mut first_frame_ns: Option<u64> = None;
+    let mut first_stats: Option<(u64, CpuTotalLite)> = None;
 
     for message in message_reader(log)? {
         let m = match message {
@@ -306,6 +352,28 @@ pub fn review(log: &Path, out_dir: &Path) -> Result<ReviewReport, LogError> {
                 };
                 *counts.entry(l.name).or_insert(0) += 1;
             }
+            topics::STATS => {
+                let Ok(st) = serde_json::from_slice::<StatsLite>(&m.data) else {
+                    r.problems
+                        .push(format!("unreadable /drogue/stats at {t} ns"));
+                    continue;
+                };
+                let res = r.resources.get_or_insert_with(Default::default);
+                res.samples += 1;
+                let (t0, first) = *first_stats.get_or_insert((st.time_ns, st.cpu_s_total));
+                let wall_s = st.time_ns.saturating_sub(t0) as f64 * 1e-9;
+                if wall_s > 0.0 {
+                    let source = st.cpu_s_total.source - first.source;
+                    let process = st.cpu_s_total.process - first.process;
+                    res.pipeline_cpu_pct = 100.0 * (process - source) / wall_s;
+                    res.source_cpu_pct = 100.0 * source / wall_s;
+                }
+                res.pipeline_cpu_max_pct = res.pipeline_cpu_max_pct.max(st.cpu_pct.pipeline);
+                res.peak_rss_bytes = res.peak_rss_bytes.max(st.rss_bytes.unwrap_or(0));
+                res.max_log_queue = res.max_log_queue.max(st.queues.log);
+                res.last_log_queue = st.queues.log;
+                res.max_link_event_queue = res.max_link_event_queue.max(st.queues.link_events);
+            }
             topics::LOG => {
                 let Ok(l) = Log::decode(m.data.as_ref()) else {
                     continue;
@@ -417,6 +485,22 @@ impl fmt::Display for ReviewReport {
             self.longest_heartbeat_gap_s,
             self.mavlink_in.values().sum::<u64>()
         )?;
+        if let Some(res) = &self.resources {
+            writeln!(
+                f,
+                "resources  pipeline CPU {:.1} % of one core (busiest second {:.1} %), source {:.1} % besides; \
+                 peak resident memory {:.1} MB",
+                res.pipeline_cpu_pct,
+                res.pipeline_cpu_max_pct,
+                res.source_cpu_pct,
+                res.peak_rss_bytes as f64 / 1e6
+            )?;
+            writeln!(
+                f,
+                "queues     log writer at most {} items ({} at the end), link events at most {} ({} samples)",
+                res.max_log_queue, res.last_log_queue, res.max_link_event_queue, res.samples
+            )?;
+        }
         writeln!(
             f,
             "problems   {} errors, {} warnings",

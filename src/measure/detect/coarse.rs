@@ -13,13 +13,16 @@ pub struct Decimated {
     pub height: usize,
     pub factor: usize,
     pub pixels: Vec<u8>,
+    /// Scratch: column sums of one block row.
+    column_sums: Vec<u16>,
 }
 
 impl Decimated {
     /// Averages `factor` x `factor` blocks (partial blocks at the right and
     /// bottom edges are dropped).
     pub fn update(&mut self, image: &GrayImage, factor: usize) {
-        let factor = factor.max(1);
+        // u16 column sums hold up to 257 rows of 255.
+        let factor = factor.clamp(1, 256);
         let (w, h) = (image.width() as usize, image.height() as usize);
         self.factor = factor;
         self.width = w / factor;
@@ -30,28 +33,36 @@ impl Decimated {
             return;
         }
         let raw = image.as_raw();
-        let mut sums = vec![0u32; self.width];
+        // Column sums of a block row first (u16: at most 16 x 255), a loop
+        // the compiler vectorises, then the sums of `factor` columns.
+        let used = self.width * factor;
+        self.column_sums.clear();
+        self.column_sums.resize(used, 0);
         let area = (factor * factor) as u32;
         for by in 0..self.height {
-            sums.iter_mut().for_each(|s| *s = 0);
-            for y in by * factor..(by + 1) * factor {
-                let row = &raw[y * w..y * w + self.width * factor];
-                if factor == 4 {
-                    for (s, block) in sums.iter_mut().zip(row.chunks_exact(4)) {
-                        *s += u32::from(block[0])
-                            + u32::from(block[1])
-                            + u32::from(block[2])
-                            + u32::from(block[3]);
-                    }
-                } else {
-                    for (s, block) in sums.iter_mut().zip(row.chunks_exact(factor)) {
-                        *s += block.iter().map(|&p| u32::from(p)).sum::<u32>();
-                    }
+            let top = by * factor;
+            let first = &raw[top * w..top * w + used];
+            for (s, &p) in self.column_sums.iter_mut().zip(first) {
+                *s = u16::from(p);
+            }
+            for y in top + 1..top + factor {
+                let row = &raw[y * w..y * w + used];
+                for (s, &p) in self.column_sums.iter_mut().zip(row) {
+                    *s += u16::from(p);
                 }
             }
             let out = &mut self.pixels[by * self.width..(by + 1) * self.width];
-            for (o, s) in out.iter_mut().zip(&sums) {
-                *o = ((s + area / 2) / area) as u8;
+            if factor == 4 {
+                // The default, unrolled: a rounded division by 16.
+                for (o, b) in out.iter_mut().zip(self.column_sums.chunks_exact(4)) {
+                    let s = u32::from(b[0]) + u32::from(b[1]) + u32::from(b[2]) + u32::from(b[3]);
+                    *o = ((s + 8) >> 4) as u8;
+                }
+            } else {
+                for (o, block) in out.iter_mut().zip(self.column_sums.chunks_exact(factor)) {
+                    let s: u32 = block.iter().map(|&v| u32::from(v)).sum();
+                    *o = ((s + area / 2) / area) as u8;
+                }
             }
         }
     }
@@ -74,10 +85,17 @@ pub struct Blob {
     pub theta: f64,
     /// Number of decimated pixels.
     pub area: usize,
-    /// One of its pixels (decimated index).
+    /// Its first pixel in raster order (decimated index).
     start: usize,
+    /// Its label in the label image of pass `pass`, and its bounding box
+    /// [x0, y0, x1, y1] (inclusive, decimated pixels).
+    label: u32,
+    pass: usize,
+    bbox: [usize; 4],
     /// The region's deepest point (farthest from its border), full-res
     /// pixels, and that distance (the inscribed radius), full-res pixels.
+    /// This and `ringed_*` are filled in by [`BlobFinder::describe_core`],
+    /// only for the blobs that get that far.
     /// Unlike the centroid, it stays on the disc when a long hose or probe
     /// merges with it.
     pub core_px: [f64; 2],
@@ -121,16 +139,86 @@ fn percentile(pixels: &[u8], fraction: f64) -> u8 {
 /// Scratch for the labelling.
 #[derive(Clone, Default)]
 pub struct BlobFinder {
-    labels: Vec<u32>,
-    stack: Vec<u32>,
+    /// The label image of each pass (highest threshold first).
+    labels: Vec<Vec<u32>>,
+    /// The dark runs of each pass, in raster order, with their labels.
+    runs: Vec<Vec<Run>>,
+    moments: Vec<RegionMoments>,
+    /// Chamfer distances over a blob's box, with a ring of zeros.
     distance: Vec<u32>,
-    /// Per label: index into the output, and the deepest pixel.
-    label_out: Vec<Option<usize>>,
-    deepest: Vec<(u32, usize)>,
-    ringed: Vec<(f64, u32, usize)>,
-    /// Labels of the highest threshold, and the size of each of its regions.
-    region_labels: Vec<u32>,
+    /// A blob's runs: (padded index of the first pixel, length, y, x0).
+    blob_runs: Vec<(usize, usize, usize, usize)>,
+    /// Size of each region of the highest threshold.
     region_areas: Vec<usize>,
+}
+
+/// A run of dark pixels `x0..x1` of row `y`, a node of the union-find.
+#[derive(Clone, Copy, Debug)]
+struct Run {
+    y: u32,
+    x0: u32,
+    x1: u32,
+    parent: u32,
+    /// The region's label (1, 2, ... in raster order), once known.
+    label: u32,
+}
+
+fn find_root(runs: &mut [Run], mut r: usize) -> usize {
+    while runs[r].parent as usize != r {
+        // Path halving.
+        let grandparent = runs[runs[r].parent as usize].parent;
+        runs[r].parent = grandparent;
+        r = grandparent as usize;
+    }
+    r
+}
+
+/// Joins two runs' sets; the root with the lower index (the earlier run)
+/// stays the root.
+fn union(runs: &mut [Run], a: usize, b: usize) {
+    let (ra, rb) = (find_root(runs, a), find_root(runs, b));
+    if ra != rb {
+        let (keep, join) = (ra.min(rb), ra.max(rb));
+        runs[join].parent = keep as u32;
+    }
+}
+
+/// Integer moments of a region (exact), its first pixel and bounding box.
+#[derive(Clone, Copy, Debug, Default)]
+struct RegionMoments {
+    n: usize,
+    sx: u64,
+    sy: u64,
+    sxx: u64,
+    sxy: u64,
+    syy: u64,
+    /// Index of its first pixel in raster order.
+    start: usize,
+    /// [x0, y0, x1, y1], inclusive.
+    bbox: [usize; 4],
+}
+
+impl RegionMoments {
+    fn add_run(&mut self, run: &Run) {
+        let (x0, x1, y) = (u64::from(run.x0), u64::from(run.x1), u64::from(run.y));
+        let n = x1 - x0;
+        // Sums of x and x^2 over x0..x1 from the closed forms of 0..k.
+        let s1 = |k: u64| k * k.saturating_sub(1) / 2;
+        let s2 = |k: u64| k.saturating_sub(1) * k * (2 * k).saturating_sub(1) / 6;
+        let sx = s1(x1) - s1(x0);
+        self.n += n as usize;
+        self.sx += sx;
+        self.sy += y * n;
+        self.sxx += s2(x1) - s2(x0);
+        self.sxy += y * sx;
+        self.syy += y * y * n;
+        self.bbox = [
+            self.bbox[0].min(run.x0 as usize),
+            self.bbox[1].min(run.y as usize),
+            self.bbox[2].max(run.x1 as usize - 1),
+            self.bbox[3].max(run.y as usize),
+        ];
+    }
 }
 
 /// Directions of the ring test around ridge points.
@@ -161,18 +249,19 @@ impl BlobFinder {
         // Highest threshold first: its regions hold those of the lower ones.
         let mut order: Vec<usize> = (0..fractions.len()).collect();
         order.sort_by(|&i, &j| fractions[j].total_cmp(&fractions[i]));
+        self.labels.resize_with(order.len(), Vec::new);
+        self.runs.resize_with(order.len(), Vec::new);
         for (pass, &level) in order.iter().enumerate() {
             let threshold = lo + fractions[level] * (hi - lo);
             let first = out.len();
-            self.label(img, threshold, min_area, out);
+            self.label(img, threshold, min_area, pass, out);
             if pass == 0 {
-                self.region_labels.clone_from(&self.labels);
                 self.region_areas.clear();
-                self.region_areas.resize(self.label_out.len(), 0);
+                self.region_areas.resize(self.moments.len(), 0);
             }
             for b in &mut out[first..] {
                 b.level = level;
-                b.region = self.region_labels[b.start];
+                b.region = self.labels[0][b.start];
                 if pass == 0 {
                     self.region_areas[b.region as usize] = b.area;
                 }
@@ -181,71 +270,65 @@ impl BlobFinder {
         }
     }
 
-    fn label(&mut self, img: &Decimated, threshold: f64, min_area: usize, out: &mut Vec<Blob>) {
+    /// Labels the 8-connected dark regions (pixels <= `threshold`) in
+    /// raster order of their first pixel, and summarises those of at least
+    /// `min_area` pixels. Works on runs of dark pixels per row, joined
+    /// across rows by union-find: far fewer steps than a pixel flood fill,
+    /// and the moments of a run have closed forms.
+    fn label(
+        &mut self,
+        img: &Decimated,
+        threshold: f64,
+        min_area: usize,
+        pass: usize,
+        out: &mut Vec<Blob>,
+    ) {
         let (w, h) = (img.width, img.height);
-        self.labels.clear();
-        self.labels.resize(w * h, 0);
         // Integer levels: p <= threshold exactly when p <= floor(threshold).
         let level = threshold.floor().clamp(-1.0, 255.0) as i32;
-        let pixels = &img.pixels;
-        let dark = |i: usize| i32::from(pixels[i]) <= level;
-        let first_out = out.len();
-        // Union of the kept regions' boxes: the distance transform runs there only.
-        let mut region = [usize::MAX, usize::MAX, 0usize, 0usize];
-        self.label_out.clear();
-        self.label_out.push(None);
-        let mut next = 1u32;
-        for start in 0..w * h {
-            if self.labels[start] != 0 || !dark(start) {
+        self.find_runs(img, level, pass);
+        let runs = &mut self.runs[pass];
+
+        // Components numbered in raster order of their first run, which
+        // holds their first pixel.
+        self.moments.clear();
+        self.moments.push(RegionMoments::default());
+        for r in 0..runs.len() {
+            let root = find_root(runs, r);
+            let label = if runs[root].label == 0 {
+                let label = self.moments.len() as u32;
+                runs[root].label = label;
+                let first = &runs[r];
+                self.moments.push(RegionMoments {
+                    start: first.y as usize * w + first.x0 as usize,
+                    bbox: [usize::MAX, usize::MAX, 0, 0],
+                    ..RegionMoments::default()
+                });
+                label
+            } else {
+                runs[root].label
+            };
+            runs[r].label = label;
+            self.moments[label as usize].add_run(&runs[r]);
+        }
+
+        let labels = &mut self.labels[pass];
+        labels.clear();
+        labels.resize(w * h, 0);
+        for run in runs.iter() {
+            let row = run.y as usize * w;
+            labels[row + run.x0 as usize..row + run.x1 as usize].fill(run.label);
+        }
+
+        for (label, m) in self.moments.iter().enumerate().skip(1) {
+            if m.n < min_area {
                 continue;
             }
-            self.labels[start] = next;
-            self.stack.clear();
-            self.stack.push(start as u32);
-            let (mut n, mut sx, mut sy, mut sxx, mut sxy, mut syy) =
-                (0usize, 0.0, 0.0, 0.0, 0.0, 0.0);
-            let mut bbox = [usize::MAX, usize::MAX, 0usize, 0usize];
-            while let Some(i) = self.stack.pop() {
-                let i = i as usize;
-                let (x, y) = ((i % w) as f64, (i / w) as f64);
-                n += 1;
-                sx += x;
-                sy += y;
-                sxx += x * x;
-                sxy += x * y;
-                syy += y * y;
-                let (xi, yi) = (i % w, i / w);
-                bbox = [
-                    bbox[0].min(xi),
-                    bbox[1].min(yi),
-                    bbox[2].max(xi),
-                    bbox[3].max(yi),
-                ];
-                // The 8 neighbours inside the image.
-                let (x0, x1) = (xi.saturating_sub(1), (xi + 1).min(w - 1));
-                let (y0, y1) = (yi.saturating_sub(1), (yi + 1).min(h - 1));
-                for ny in y0..y1 + 1 {
-                    for j in ny * w + x0..ny * w + x1 + 1 {
-                        if self.labels[j] == 0 && dark(j) {
-                            self.labels[j] = next;
-                            self.stack.push(j as u32);
-                        }
-                    }
-                }
-            }
-            next += 1;
-            if n < min_area {
-                self.label_out.push(None);
-                continue;
-            }
-            self.label_out.push(Some(out.len()));
-            region = [
-                region[0].min(bbox[0].saturating_sub(1)),
-                region[1].min(bbox[1].saturating_sub(1)),
-                region[2].max((bbox[2] + 1).min(w - 1)),
-                region[3].max((bbox[3] + 1).min(h - 1)),
-            ];
+            // Exact integer sums (as f64 they are exact below 2^53).
+            let n = m.n;
             let nf = n as f64;
+            let (sx, sy) = (m.sx as f64, m.sy as f64);
+            let (sxx, sxy, syy) = (m.sxx as f64, m.sxy as f64, m.syy as f64);
             let (mx, my) = (sx / nf, sy / nf);
             // Second central moments; a filled ellipse has variance a^2/4
             // along its major axis.
@@ -265,7 +348,10 @@ impl BlobFinder {
                 b_px: b * f,
                 theta,
                 area: n,
-                start,
+                start: m.start,
+                label: label as u32,
+                pass,
+                bbox: m.bbox,
                 region: 0,
                 region_area: 0,
                 level: 0,
@@ -276,122 +362,169 @@ impl BlobFinder {
                 ringed_light: 0.0,
             });
         }
-        if out.len() > first_out {
-            self.deepest_points(img, region, first_out, out);
+    }
+
+    /// The runs of dark pixels (<= `level`) of each row, in raster order,
+    /// each joined (union-find) to the 8-connected runs of the row above.
+    fn find_runs(&mut self, img: &Decimated, level: i32, pass: usize) {
+        let w = img.width;
+        let runs = &mut self.runs[pass];
+        runs.clear();
+        let mut above = 0..0;
+        for (y, row) in img.pixels.chunks_exact(w).enumerate() {
+            let first = runs.len();
+            let mut x = 0;
+            while x < w {
+                // Skip light pixels, 16 at a time while a whole block is light.
+                while x + 16 <= w && row[x..x + 16].iter().all(|&p| i32::from(p) > level) {
+                    x += 16;
+                }
+                while x < w && i32::from(row[x]) > level {
+                    x += 1;
+                }
+                if x == w {
+                    break;
+                }
+                let x0 = x;
+                while x < w && i32::from(row[x]) <= level {
+                    x += 1;
+                }
+                let index = runs.len();
+                runs.push(Run {
+                    y: y as u32,
+                    x0: x0 as u32,
+                    x1: x as u32,
+                    parent: index as u32,
+                    label: 0,
+                });
+            }
+            // 8-connected: [x0, x1) and [u0, u1) touch when x0 <= u1 and u0 <= x1.
+            let current = first..runs.len();
+            let mut j = above.start;
+            for i in current.clone() {
+                while j < above.end && runs[j].x1 < runs[i].x0 {
+                    j += 1;
+                }
+                let mut k = j;
+                while k < above.end && runs[k].x0 <= runs[i].x1 {
+                    union(runs, i, k);
+                    k += 1;
+                }
+            }
+            above = current;
         }
     }
 
-    /// Chamfer (3-4) distance of every dark pixel to the nearest non-dark
-    /// pixel or the image border, and each region's deepest pixel.
-    /// `region`: [x0, y0, x1, y1] (inclusive) holding the regions and a
-    /// pixel around them.
-    fn deepest_points(
-        &mut self,
-        img: &Decimated,
-        region: [usize; 4],
-        first_out: usize,
-        out: &mut [Blob],
-    ) {
+    /// Fills in the blob's deepest point and its best-ringed ridge point
+    /// (`core_*`, `ringed_*`). Chamfer (3-4) distance of each of its pixels
+    /// to the nearest pixel outside it (or the image border), over its box
+    /// and a pixel around it, kept with a ring of zeros so the passes need
+    /// no bounds checks. The nearest outside pixel of a region is always
+    /// one of its light 8-neighbours, so its own box is all it takes.
+    pub fn describe_core(&mut self, img: &Decimated, blob: &mut Blob) {
         let (w, h) = (img.width, img.height);
-        let [rx0, ry0, rx1, ry1] = region;
+        let Some(labels) = self.labels.get(blob.pass) else {
+            return;
+        };
+        if labels.len() != w * h || w == 0 || h == 0 {
+            return;
+        }
+        let label = blob.label;
+        let [bx0, by0, bx1, by1] = blob.bbox;
+        let (rx0, ry0) = (bx0.saturating_sub(1), by0.saturating_sub(1));
+        let (rx1, ry1) = ((bx1 + 1).min(w - 1), (by1 + 1).min(h - 1));
+        let pw = rx1 - rx0 + 3;
+        let ph = ry1 - ry0 + 3;
+        // Padded index of decimated pixel (x, y).
+        let pad = |x: usize, y: usize| (y + 1 - ry0) * pw + (x + 1 - rx0);
         let d = &mut self.distance;
         d.clear();
-        d.resize(w * h, 0);
-        let labels = &self.labels;
+        d.resize(pw * ph, 0);
         let inf = u32::MAX / 2;
-        for y in ry0..=ry1 {
-            for i in y * w + rx0..=y * w + rx1 {
-                if labels[i] != 0 {
-                    d[i] = inf;
-                }
-            }
-        }
-        let at = |d: &Vec<u32>, x: i64, y: i64| -> u32 {
-            if x < rx0 as i64 || y < ry0 as i64 || x > rx1 as i64 || y > ry1 as i64 {
-                0
-            } else {
-                d[y as usize * w + x as usize]
-            }
+        // Only the region's own runs are visited: the rest of its box
+        // stays zero (outside the region), as the passes leave it.
+        let Some(all_runs) = self.runs.get(blob.pass) else {
+            return;
         };
-        for y in ry0 as i64..=ry1 as i64 {
-            for x in rx0 as i64..=rx1 as i64 {
-                let i = y as usize * w + x as usize;
-                if d[i] == 0 {
-                    continue;
-                }
-                let v = d[i]
-                    .min(at(d, x - 1, y) + 3)
-                    .min(at(d, x, y - 1) + 3)
-                    .min(at(d, x - 1, y - 1) + 4)
-                    .min(at(d, x + 1, y - 1) + 4);
-                d[i] = v;
+        let runs = &mut self.blob_runs;
+        runs.clear();
+        runs.extend(all_runs.iter().filter(|r| r.label == label).map(|r| {
+            let (y, x0, x1) = (r.y as usize, r.x0 as usize, r.x1 as usize);
+            (pad(x0, y), x1 - x0, y, x0)
+        }));
+        for &(start, len, _, _) in runs.iter() {
+            d[start..start + len].fill(inf);
+        }
+        // Forward pass in raster order (runs are in raster order), then
+        // backward.
+        for &(start, len, _, _) in runs.iter() {
+            for i in start..start + len {
+                d[i] = d[i]
+                    .min(d[i - 1] + 3)
+                    .min(d[i - pw] + 3)
+                    .min(d[i - pw - 1] + 4)
+                    .min(d[i - pw + 1] + 4);
             }
         }
-        for y in (ry0 as i64..=ry1 as i64).rev() {
-            for x in (rx0 as i64..=rx1 as i64).rev() {
-                let i = y as usize * w + x as usize;
-                if d[i] == 0 {
-                    continue;
-                }
-                let v = d[i]
-                    .min(at(d, x + 1, y) + 3)
-                    .min(at(d, x, y + 1) + 3)
-                    .min(at(d, x + 1, y + 1) + 4)
-                    .min(at(d, x - 1, y + 1) + 4);
-                d[i] = v;
+        for &(start, len, _, _) in runs.iter().rev() {
+            for i in (start..start + len).rev() {
+                d[i] = d[i]
+                    .min(d[i + 1] + 3)
+                    .min(d[i + pw] + 3)
+                    .min(d[i + pw + 1] + 4)
+                    .min(d[i + pw - 1] + 4);
             }
         }
-        self.deepest.clear();
-        self.deepest.resize(out.len() - first_out, (0, 0));
-        for y in ry0..ry1 + 1 {
-            for i in y * w + rx0..y * w + rx1 + 1 {
-                if let Some(Some(o)) = self.label_out.get(labels[i] as usize) {
-                    let slot = &mut self.deepest[o - first_out];
-                    if d[i] > slot.0 {
-                        *slot = (d[i], i);
-                    }
+        // The deepest pixel (the first in raster order on ties).
+        let mut deepest = (0u32, blob.start);
+        for &(start, len, y, x0) in runs.iter() {
+            for k in 0..len {
+                let di = d[start + k];
+                if di > deepest.0 {
+                    deepest = (di, y * w + x0 + k);
                 }
             }
         }
         // Ridge points (a local maximum of the distance across the region in
         // at least one direction) and the light share of a ring just
-        // outside their inscribed circle.
-        self.ringed.clear();
-        self.ringed.resize(out.len() - first_out, (0.0, 0, 0));
-        let ring: Vec<(f64, f64)> = (0..RING_SAMPLES)
-            .map(|k| (std::f64::consts::TAU * k as f64 / RING_SAMPLES as f64).sin_cos())
-            .collect();
-        for y in ry0.max(1)..=ry1.min(h.saturating_sub(2)) {
-            for x in rx0.max(1)..=rx1.min(w.saturating_sub(2)) {
+        // outside their inscribed circle. Not on the image's outermost
+        // rows and columns.
+        let mut ringed = (0.0f64, 0u32, 0usize);
+        for &(start, len, y, x0) in runs.iter() {
+            if y == 0 || y + 1 >= h {
+                continue;
+            }
+            for k in 0..len {
+                let x = x0 + k;
+                if x == 0 || x + 1 >= w {
+                    continue;
+                }
                 let i = y * w + x;
-                let di = d[i];
+                let pi = start + k;
+                let di = d[pi];
                 if di < 6 {
                     continue;
                 }
-                let Some(Some(o)) = self.label_out.get(labels[i] as usize) else {
-                    continue;
-                };
                 // Only the thick parts: the disc is among its region's
                 // thickest (thin hose ends are ringed by light too).
-                if 2 * di < self.deepest[o - first_out].0 {
+                if 2 * di < deepest.0 {
                     continue;
                 }
-                let ridge =
-                    [(1, w), (w, 1), (w + 1, w - 1), (w - 1, w + 1)]
-                        .iter()
-                        .any(|&(a, b)| {
-                            di >= d[i - a]
-                                && di >= d[i + b]
-                                && di >= d[i + a]
-                                && di >= d[i - b]
-                                && (di > d[i - a] || di > d[i + a])
-                        });
+                let ridge = [(1, pw), (pw, 1), (pw + 1, pw - 1), (pw - 1, pw + 1)]
+                    .iter()
+                    .any(|&(a, b)| {
+                        di >= d[pi - a]
+                            && di >= d[pi + b]
+                            && di >= d[pi + a]
+                            && di >= d[pi - b]
+                            && (di > d[pi - a] || di > d[pi + a])
+                    });
                 if !ridge {
                     continue;
                 }
                 let rho = f64::from(di) / 3.0 * 1.25 + 1.0;
                 let (mut seen, mut light) = (0usize, 0usize);
-                for &(sn, cs) in &ring {
+                for &(sn, cs) in RING.iter() {
                     let (u, v) = (x as f64 + rho * cs, y as f64 + rho * sn);
                     if u < 0.0 || v < 0.0 || u >= w as f64 || v >= h as f64 {
                         continue;
@@ -407,26 +540,28 @@ impl BlobFinder {
                     continue;
                 }
                 let share = light as f64 / RING_SAMPLES as f64;
-                let slot = &mut self.ringed[o - first_out];
-                if share > slot.0 || (share == slot.0 && di > slot.1) {
-                    *slot = (share, di, i);
+                if share > ringed.0 || (share == ringed.0 && di > ringed.1) {
+                    ringed = (share, di, i);
                 }
             }
         }
         let f = img.factor as f64;
-        for (blob, &(share, dist, i)) in out[first_out..].iter_mut().zip(&self.ringed) {
-            blob.ringed_light = share;
-            blob.ringed_px = img.to_full((i % w) as f64, (i / w) as f64);
-            blob.ringed_radius_px = ((f64::from(dist) / 3.0) - 0.5).max(0.5) * f;
-        }
-        for (blob, &(dist, i)) in out[first_out..].iter_mut().zip(&self.deepest) {
-            blob.core_px = img.to_full((i % w) as f64, (i / w) as f64);
-            // Chamfer units are 3 per pixel; the distance counts to the
-            // centre of the first outside pixel, half a pixel too far.
-            blob.core_radius_px = ((f64::from(dist) / 3.0) - 0.5).max(0.5) * f;
-        }
+        let (share, dist, i) = ringed;
+        blob.ringed_light = share;
+        blob.ringed_px = img.to_full((i % w) as f64, (i / w) as f64);
+        blob.ringed_radius_px = ((f64::from(dist) / 3.0) - 0.5).max(0.5) * f;
+        let (dist, i) = deepest;
+        blob.core_px = img.to_full((i % w) as f64, (i / w) as f64);
+        // Chamfer units are 3 per pixel; the distance counts to the
+        // centre of the first outside pixel, half a pixel too far.
+        blob.core_radius_px = ((f64::from(dist) / 3.0) - 0.5).max(0.5) * f;
     }
 }
+
+/// Unit directions (sin, cos) of the ring test around ridge points.
+static RING: std::sync::LazyLock<[(f64, f64); RING_SAMPLES]> = std::sync::LazyLock::new(|| {
+    std::array::from_fn(|k| (std::f64::consts::TAU * k as f64 / RING_SAMPLES as f64).sin_cos())
+});
 
 #[cfg(test)]
 mod tests {
@@ -454,6 +589,147 @@ mod tests {
             (b.a_px - r).abs() < 3.0 && (b.b_px - r).abs() < 3.0,
             "{b:?}"
         );
+    }
+
+    #[test]
+    fn core_stays_on_a_disc_with_a_hose_merged_into_it() {
+        // A disc of radius 40 with a long bar (a hose) leaving it to the
+        // right: the centroid moves onto the bar, the core must not.
+        let mut img = GrayImage::from_pixel(640, 320, Luma([180]));
+        let (cx, cy, r) = (160.0, 160.0, 40.0);
+        for (x, y, p) in img.enumerate_pixels_mut() {
+            let (dx, dy) = (x as f64 - cx, y as f64 - cy);
+            if dx * dx + dy * dy <= r * r || (dx > 0.0 && dy.abs() <= 12.0) {
+                *p = Luma([30]);
+            }
+        }
+        let mut dec = Decimated::default();
+        dec.update(&img, 4);
+        let mut finder = BlobFinder::default();
+        let mut blobs = Vec::new();
+        finder.find(&dec, &[0.5], 2, 10.0, &mut blobs);
+        assert_eq!(blobs.len(), 1);
+        let mut b = blobs[0].clone();
+        assert!(b.centre_px[0] > cx + 40.0, "{b:?}");
+        finder.describe_core(&dec, &mut b);
+        let off = (b.core_px[0] - cx).hypot(b.core_px[1] - cy);
+        assert!(off <= 4.0, "core {:?}", b.core_px);
+        // Two decimated pixels: the block size and the chamfer metric.
+        assert!((b.core_radius_px - r).abs() <= 8.0, "{}", b.core_radius_px);
+        // The disc's centre is ringed by light on all sides but the hose's.
+        let off = (b.ringed_px[0] - cx).hypot(b.ringed_px[1] - cy);
+        assert!(off <= 8.0 && b.ringed_light >= 0.75, "{b:?}");
+    }
+
+    /// The regions by a plain 8-connected pixel flood fill: (first pixel,
+    /// area, centroid), in raster order of their first pixel.
+    fn flood_fill_regions(img: &Decimated, level: i32) -> Vec<(usize, usize, [f64; 2])> {
+        let (w, h) = (img.width, img.height);
+        let dark = |i: usize| i32::from(img.pixels[i]) <= level;
+        let mut seen = vec![false; w * h];
+        let mut regions = Vec::new();
+        for start in 0..w * h {
+            if seen[start] || !dark(start) {
+                continue;
+            }
+            seen[start] = true;
+            let mut stack = vec![start];
+            let (mut n, mut sx, mut sy) = (0usize, 0.0, 0.0);
+            while let Some(i) = stack.pop() {
+                let (x, y) = (i % w, i / w);
+                n += 1;
+                sx += x as f64;
+                sy += y as f64;
+                for ny in y.saturating_sub(1)..(y + 2).min(h) {
+                    for nx in x.saturating_sub(1)..(x + 2).min(w) {
+                        let j = ny * w + nx;
+                        if !seen[j] && dark(j) {
+                            seen[j] = true;
+                            stack.push(j);
+                        }
+                    }
+                }
+            }
+            regions.push((start, n, img.to_full(sx / n as f64, sy / n as f64)));
+        }
+        regions
+    }
+
+    #[test]
+    fn run_labelling_matches_a_pixel_flood_fill() {
+        use rand::{Rng, SeedableRng};
+        // Smoothed noise: regions with holes, spirals of U-shapes that
+        // join rows below, and single pixels touching only diagonally.
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+        for trial in 0..20 {
+            let (w, h) = (37 + trial, 29 + 2 * trial);
+            let noise: Vec<f64> = (0..w * h).map(|_| rng.random_range(0.0..255.0)).collect();
+            let smooth = trial % 3;
+            let pixels: Vec<u8> = (0..w * h)
+                .map(|i| {
+                    let (x, y) = ((i % w) as i64, (i / w) as i64);
+                    let (mut sum, mut count) = (0.0, 0.0);
+                    for dy in -(smooth as i64)..=smooth as i64 {
+                        for dx in -(smooth as i64)..=smooth as i64 {
+                            let (u, v) = (x + dx, y + dy);
+                            if u >= 0 && v >= 0 && u < w as i64 && v < h as i64 {
+                                sum += noise[v as usize * w + u as usize];
+                                count += 1.0;
+                            }
+                        }
+                    }
+                    (sum / count) as u8
+                })
+                .collect();
+            let img = Decimated {
+                width: w,
+                height: h,
+                factor: 4,
+                pixels,
+                column_sums: Vec::new(),
+            };
+            let lo = f64::from(*img.pixels.iter().min().unwrap());
+            let hi = f64::from(percentile(&img.pixels, 0.5));
+            for fraction in [0.3, 0.6, 0.9] {
+                let threshold = lo + fraction * (hi - lo);
+                let mut blobs = Vec::new();
+                BlobFinder::default().find(&img, &[fraction], 1, 0.0, &mut blobs);
+                let expected = flood_fill_regions(&img, threshold.floor() as i32);
+                assert_eq!(blobs.len(), expected.len(), "trial {trial} at {fraction}");
+                for (b, (start, n, centre)) in blobs.iter().zip(&expected) {
+                    assert_eq!((b.start, b.area), (*start, *n));
+                    assert!((b.centre_px[0] - centre[0]).abs() < 1e-9);
+                    assert!((b.centre_px[1] - centre[1]).abs() < 1e-9);
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn decimation_is_the_rounded_block_mean() {
+        let img = GrayImage::from_fn(67, 45, |x, y| Luma([((x * 37 + y * 91) % 256) as u8]));
+        for factor in [1usize, 3, 4, 16] {
+            let mut dec = Decimated::default();
+            dec.update(&img, factor);
+            assert_eq!((dec.width, dec.height), (67 / factor, 45 / factor));
+            for by in 0..dec.height {
+                for bx in 0..dec.width {
+                    let mut sum = 0u32;
+                    for y in by * factor..(by + 1) * factor {
+                        for x in bx * factor..(bx + 1) * factor {
+                            sum += u32::from(img.get_pixel(x as u32, y as u32)[0]);
+                        }
+                    }
+                    let area = (factor * factor) as f64;
+                    let mean = (f64::from(sum) / area + 0.5).floor() as u8;
+                    assert_eq!(
+                        dec.pixels[by * dec.width + bx],
+                        mean,
+                        "{factor} at {bx},{by}"
+                    );
+                }
+            }
+        }
     }
 
     #[test]

@@ -49,6 +49,9 @@ pub struct DetectConfig {
     pub rim_point_spacing_px: f64,
     /// Most rim points per frame.
     pub max_rim_points: u32,
+    /// Most rim points on a tracked frame (searched near the predicted
+    /// ellipse): fewer rays make the search and the fit cheaper.
+    pub tracked_max_rim_points: u32,
     /// Half-width of the narrow rim search around a candidate ellipse, as a
     /// fraction of its radius, and at most this many pixels.
     pub rim_search_fraction: f64,
@@ -162,7 +165,12 @@ impl Detector {
             return None;
         }
         if let Some(h) = hint.filter(|h| h.a.is_finite() && h.b > 0.5 && h.a < 1e5)
-            && let Some(v) = self.verify_settled(image, h, self.cfg.rim_point_spacing_px)
+            && let Some(v) = self.verify_settled(
+                image,
+                h,
+                self.cfg.rim_point_spacing_px,
+                self.cfg.tracked_max_rim_points,
+            )
         {
             return Some(v.into_candidate());
         }
@@ -202,7 +210,8 @@ impl Detector {
         });
         let mut kept: Vec<Blob> = Vec::new();
         let mut regions = 0usize;
-        for (i, b) in blobs.iter().enumerate() {
+        for i in 0..blobs.len() {
+            let b = &blobs[i];
             let new_region = i == 0 || blobs[i - 1].region != b.region;
             if new_region {
                 if regions >= self.cfg.max_candidates as usize {
@@ -219,6 +228,8 @@ impl Detector {
             {
                 continue;
             }
+            self.finder.describe_core(&self.decimated, &mut blobs[i]);
+            let b = &blobs[i];
             // Drop near-duplicates (the same region at several thresholds).
             let dup = kept.iter().any(|k| {
                 let near = |p: [f64; 2], q: [f64; 2], r: f64| (p[0] - q[0]).hypot(p[1] - q[1]) < r;
@@ -286,8 +297,9 @@ impl Detector {
         self.blobs = blobs;
         let scouted = best?;
         let spacing = self.cfg.rim_point_spacing_px;
+        let max_points = self.cfg.max_rim_points;
         Some(
-            self.verify_settled(image, &scouted.ellipse, spacing)
+            self.verify_settled(image, &scouted.ellipse, spacing, max_points)
                 .unwrap_or(scouted),
         )
     }
@@ -306,9 +318,11 @@ impl Detector {
             let r = polar_radius(seed.a_px, seed.b_px, seed.theta, phi).min(longest);
             let dir = [phi.cos(), phi.sin()];
             let s_max = seed.reach * r + 4.0;
-            // About a pixel of accuracy is enough here: coarser steps on
-            // large seeds.
-            let step = (r / 40.0).clamp(0.5, 2.0);
+            // About a pixel of accuracy on a small seed, a percent of its
+            // size on a large one, is enough here (the narrow passes
+            // refine it): a fixed number of steps per radius, so that a
+            // large dark region (cloud, shadow) costs no more than a disc.
+            let step = (r / 40.0).max(0.5);
             rim::profile(image, c, dir, 1.0, s_max, step, &mut self.profile);
             if let Some(e) =
                 rim::strongest_rise(&self.profile, 1.0, step, self.cfg.min_contrast_gray as f32)
@@ -347,6 +361,7 @@ impl Detector {
             image,
             &first,
             SCOUT_SPACING_FACTOR * self.cfg.rim_point_spacing_px,
+            self.cfg.max_rim_points,
         )
     }
 
@@ -369,15 +384,16 @@ impl Detector {
         image: &GrayImage,
         start: &Ellipse,
         spacing_px: f64,
+        max_points: u32,
     ) -> Option<Verified> {
-        let mut v = self.verify_near(image, start, spacing_px)?;
+        let mut v = self.verify_near(image, start, spacing_px, max_points)?;
         let mut previous = *start;
         for _ in 0..2 {
             if v.ellipse.max_param_error_px(&previous) <= 0.5 {
                 break;
             }
             previous = v.ellipse;
-            v = self.verify_near(image, &previous, spacing_px)?;
+            v = self.verify_near(image, &previous, spacing_px, max_points)?;
         }
         Some(v)
     }
@@ -387,11 +403,12 @@ impl Detector {
         image: &GrayImage,
         start: &Ellipse,
         spacing_px: f64,
+        max_points: u32,
     ) -> Option<Verified> {
         let centre = self.camera.distort_px([start.cx, start.cy]);
         let perimeter = TAU * ((start.a * start.a + start.b * start.b) / 2.0).sqrt();
-        let rays = ((perimeter / spacing_px.max(0.1)) as usize)
-            .clamp(24, self.cfg.max_rim_points.max(24) as usize);
+        let rays =
+            ((perimeter / spacing_px.max(0.1)) as usize).clamp(24, max_points.max(24) as usize);
         let min_contrast = self.cfg.min_contrast_gray as f32;
         let (w, h) = (f64::from(image.width()), f64::from(image.height()));
         let inside = |p: [f64; 2]| p[0] >= 0.0 && p[1] >= 0.0 && p[0] <= w - 1.0 && p[1] <= h - 1.0;
