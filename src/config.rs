@@ -10,6 +10,7 @@ use crate::measure::detect::DetectConfig;
 use crate::measure::fit::FitConfig;
 use crate::measure::mount::MountConfig;
 use crate::measure::track::TrackConfig;
+use crate::source::v4l::V4lConfig;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 use toml::Value;
@@ -101,6 +102,7 @@ pub struct Config {
     pub link: LinkConfig,
     pub log: LogConfig,
     pub run: RunConfig,
+    pub v4l: V4lConfig,
 }
 
 /// Finds keys of `user` that `default` does not have, as dotted paths.

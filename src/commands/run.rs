@@ -121,7 +121,7 @@ fn open_frames(
     config: &Config,
 ) -> Result<Frames, RunError> {
     match (vehicle_pose, spec) {
-        (VehiclePoseSource::Script, _) => Ok(Frames::Source(open_source(spec)?)),
+        (VehiclePoseSource::Script, _) => Ok(Frames::Source(open_source(spec, config)?)),
         (VehiclePoseSource::Mavlink, SourceSpec::Sim(name)) => {
             if args.fast {
                 return Err(RunError::Setup(
@@ -371,17 +371,13 @@ impl Pacer {
     }
 }
 
-fn open_source(spec: &SourceSpec) -> Result<Box<dyn FrameSource>, RunError> {
+fn open_source(spec: &SourceSpec, config: &Config) -> Result<Box<dyn FrameSource>, RunError> {
     let setup = |e: crate::source::SourceError| RunError::Setup(e.to_string());
     Ok(match spec {
         SourceSpec::Sim(name) => Box::new(SimSource::open(name).map_err(setup)?),
         SourceSpec::Dir(path) => Box::new(DirSource::open(path).map_err(setup)?),
         SourceSpec::Mcap(path) => Box::new(McapSource::open(path).map_err(setup)?),
-        SourceSpec::V4l(dev) => {
-            return Err(RunError::Setup(format!(
-                "source v4l:{dev}: this build has no V4L2 camera support"
-            )));
-        }
+        SourceSpec::V4l(dev) => crate::source::v4l::open(dev, &config.v4l).map_err(setup)?,
     })
 }
 
@@ -574,6 +570,7 @@ pub fn run(
     // measurement right when latency matters, which a camera never does.
     let (handed_tx, handed_rx) = std::sync::mpsc::channel::<u64>();
     let yield_to_measurement = frames_in.source().renders_frames();
+    let live = frames_in.source().live();
     let (frame_tx, measure_thread) = spawn_measurement(
         measurer,
         mount,
@@ -635,9 +632,10 @@ pub fn run(
         }
         let frame = Arc::new(frame);
         log.frame(Arc::clone(&frame));
-        // Offline and fast sources wait for the measurement; a live one never
-        // does (a frame that finds the measurement busy is skipped).
-        if !paced {
+        // Offline and fast sources wait for the measurement; a live one (a
+        // paced timeline, a camera) never does: a frame that finds the
+        // measurement busy is skipped.
+        if !paced && !live {
             if frame_tx.send(frame).is_err() {
                 return Err(RunError::Runtime("measurement thread ended".into()));
             }

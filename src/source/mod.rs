@@ -1,8 +1,10 @@
-//! Frame sources for `run`: the simulator, a folder of images, an MCAP log.
+//! Frame sources for `run`: the simulator, a folder of images, an MCAP log,
+//! a V4L2 camera.
 
 pub mod dir;
 pub mod mcap;
 pub mod sim;
+pub mod v4l;
 
 use crate::camera::CameraModel;
 use crate::frame::Frame;
@@ -74,6 +76,13 @@ pub trait FrameSource: Send {
     /// for the next one, so the source never competes with the pipeline for
     /// a core, as a camera never would.
     fn renders_frames(&self) -> bool {
+        false
+    }
+    /// Whether frames come in real time whatever the pipeline does (a
+    /// camera): such a source must not wait for the measurement; a frame
+    /// that finds it busy is skipped for measurement (and still logged),
+    /// or else the driver's buffers fill and the latency grows.
+    fn live(&self) -> bool {
         false
     }
     /// The next frame; `None` at the end of the source.
