@@ -12,5 +12,6 @@ pub mod image_io;
 pub mod link;
 pub mod log;
 pub mod measure;
+pub mod priority;
 pub mod record;
 pub mod source;

@@ -303,7 +303,10 @@ impl FlightLog {
         let (tx, rx) = mpsc::sync_channel(cfg.queue_len);
         let thread = std::thread::Builder::new()
             .name("mcap-log".into())
-            .spawn(move || w.run(rx))
+            .spawn(move || {
+                crate::priority::make_this_thread_background("log writer");
+                w.run(rx)
+            })
             .map_err(|e| LogError::Writer(format!("cannot start the writer thread: {e}")))?;
         Ok(LogHandle {
             shared: Arc::new(Shared {
