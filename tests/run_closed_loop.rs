@@ -225,25 +225,22 @@ fn the_view_and_landing_target_ned_follow_the_autopilot() {
         (!(SILENT_S.0..SILENT_S.1).contains(&s)).then(|| scripted(s))
     });
     let autopilot = Autopilot::start(Some(script), 50.0);
-    let stderr_path = tmp.path().join("stderr.txt");
-    let mut child = spawn_run(
+    let PeerRun {
+        status,
+        received,
+        stderr,
+    } = run_with_peer(
         &[
             "--source".into(),
             format!("sim:{}", scenario.display()),
             "--vehicle-pose".into(),
             "mavlink".into(),
-            "--mavlink".into(),
-            autopilot.address(),
-            "--log-dir".into(),
-            logs.display().to_string(),
-            "--config".into(),
-            config.display().to_string(),
         ],
-        &stderr_path,
+        autopilot,
+        &logs,
+        &config,
+        &tmp.path().join("stderr.txt"),
     );
-    let status = wait_with_limit(&mut child, Duration::from_secs(60));
-    let received = autopilot.finish();
-    let stderr = std::fs::read_to_string(&stderr_path).unwrap();
     assert!(status.success(), "run ended with {status:?}:\n{stderr}");
 
     // Every frame is logged, each with its truth in the autopilot's frame.
@@ -441,25 +438,22 @@ fn world_anchor_vehicle_flying_with_the_tanker() {
     };
     let script: Script = Arc::new(move |now_ns| Some(flown(secs(now_ns))));
     let autopilot = Autopilot::start(Some(script), 50.0);
-    let stderr_path = tmp.path().join("stderr.txt");
-    let mut child = spawn_run(
+    let PeerRun {
+        status,
+        received,
+        stderr,
+    } = run_with_peer(
         &[
             "--source".into(),
             format!("sim:{}", scenario.display()),
             "--vehicle-pose".into(),
             "mavlink".into(),
-            "--mavlink".into(),
-            autopilot.address(),
-            "--log-dir".into(),
-            logs.display().to_string(),
-            "--config".into(),
-            config.display().to_string(),
         ],
-        &stderr_path,
+        autopilot,
+        &logs,
+        &config,
+        &tmp.path().join("stderr.txt"),
     );
-    let status = wait_with_limit(&mut child, Duration::from_secs(60));
-    let received = autopilot.finish();
-    let stderr = std::fs::read_to_string(&stderr_path).unwrap();
     assert!(status.success(), "run ended with {status:?}:\n{stderr}");
 
     // The drogue at a capture time, autopilot NED: ahead of the vehicle's

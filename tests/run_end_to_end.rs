@@ -15,7 +15,7 @@ use drogue_sim::{Scenario, Simulator};
 use mavlink::dialects::ardupilotmega::{LandingTargetType, MavBool, MavFrame};
 use run_support::*;
 use std::collections::HashMap;
-use std::time::{Duration, Instant};
+use std::time::Instant;
 
 const FRAMES: u64 = 300;
 
@@ -28,29 +28,24 @@ fn approach_landing_targets_match_the_truth_and_every_frame_is_logged() {
     // can be checked.
     std::fs::write(&config, "[link]\nmax_rate_hz = 0.0\n").unwrap();
     let peer = Autopilot::start(None, 50.0);
-    let stderr_path = tmp.path().join("stderr.txt");
     let started = Instant::now();
-    let mut child = spawn_run(
+    let PeerRun {
+        status,
+        received,
+        stderr,
+    } = run_with_peer(
         &[
             "--source".into(),
             "sim:approach".into(),
             "--max-frames".into(),
             FRAMES.to_string(),
-            "--mavlink".into(),
-            peer.address(),
-            "--log-dir".into(),
-            logs.display().to_string(),
-            "--config".into(),
-            config.display().to_string(),
         ],
-        &stderr_path,
+        peer,
+        &logs,
+        &config,
+        &tmp.path().join("stderr.txt"),
     );
-    let status = wait_with_limit(&mut child, Duration::from_secs(60));
     let elapsed = started.elapsed();
-    // Stragglers still in flight.
-    std::thread::sleep(Duration::from_millis(100));
-    let received = peer.finish();
-    let stderr = std::fs::read_to_string(&stderr_path).unwrap();
     assert!(status.success(), "run ended with {status:?}:\n{stderr}");
     assert_eq!(frames_in_summary(&stderr), FRAMES, "{stderr}");
 

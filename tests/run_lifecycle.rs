@@ -1,7 +1,10 @@
 //! `run` ends cleanly on SIGINT and survives SIGKILL with a readable log.
 //! The logs are read with the `mcap` crate's own readers, not ours.
 
-use std::path::{Path, PathBuf};
+mod run_support;
+
+use run_support::only_log;
+use std::path::Path;
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
@@ -26,16 +29,6 @@ fn signal(child: &Child, sig: &str) {
         .status()
         .expect("kill");
     assert!(status.success());
-}
-
-fn only_log(dir: &Path) -> PathBuf {
-    let logs: Vec<PathBuf> = std::fs::read_dir(dir)
-        .expect("log dir")
-        .map(|e| e.expect("entry").path())
-        .filter(|p| p.extension().is_some_and(|e| e == "mcap"))
-        .collect();
-    assert_eq!(logs.len(), 1, "{logs:?}");
-    logs[0].clone()
 }
 
 /// `/camera/image` messages readable by streaming, and whether the stream

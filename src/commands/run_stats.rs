@@ -67,9 +67,9 @@ pub fn resident_bytes() -> Option<u64> {
 }
 
 /// One reading of the cumulative counters.
-#[derive(Clone, Copy, Debug, Default)]
+#[derive(Clone, Copy, Debug)]
 struct Reading {
-    wall: Option<Instant>,
+    wall: Instant,
     process_cpu_ns: u64,
     source_cpu_ns: u64,
     measure_cpu_ns: u64,
@@ -78,7 +78,7 @@ struct Reading {
 impl Reading {
     fn now(meters: &PipelineMeters) -> Self {
         Self {
-            wall: Some(Instant::now()),
+            wall: Instant::now(),
             process_cpu_ns: ProcessTime::try_now()
                 .map(|t| t.as_duration().as_nanos() as u64)
                 .unwrap_or(0),
@@ -126,10 +126,7 @@ struct Sampler {
 impl Sampler {
     fn sample(&mut self) {
         let now = Reading::now(&self.meters);
-        let (Some(t0), Some(t1)) = (self.last.wall, now.wall) else {
-            return;
-        };
-        let wall = t1.duration_since(t0);
+        let wall = now.wall.duration_since(self.last.wall);
         let d = |a: u64, b: u64| b.saturating_sub(a);
         let process = d(self.last.process_cpu_ns, now.process_cpu_ns);
         let source = d(self.last.source_cpu_ns, now.source_cpu_ns);
@@ -168,13 +165,11 @@ impl Sampler {
         self.last = now;
         self.summary.peak_rss_bytes = self.summary.peak_rss_bytes.max(rss.unwrap_or(0));
         self.summary.max_log_queue = self.summary.max_log_queue.max(log_queue);
-        if let Some(t_first) = self.first.wall {
-            let total_wall = t1.duration_since(t_first);
-            let process = d(self.first.process_cpu_ns, now.process_cpu_ns);
-            let source = d(self.first.source_cpu_ns, now.source_cpu_ns);
-            self.summary.pipeline_cpu_pct = pct(process.saturating_sub(source), total_wall);
-            self.summary.source_cpu_pct = pct(source, total_wall);
-        }
+        let total_wall = now.wall.duration_since(self.first.wall);
+        let process = d(self.first.process_cpu_ns, now.process_cpu_ns);
+        let source = d(self.first.source_cpu_ns, now.source_cpu_ns);
+        self.summary.pipeline_cpu_pct = pct(process.saturating_sub(source), total_wall);
+        self.summary.source_cpu_pct = pct(source, total_wall);
     }
 }
 

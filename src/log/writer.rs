@@ -215,7 +215,7 @@ impl Writer {
     fn handle(&mut self, item: Item) {
         match item {
             Item::Frame(frame) => self.frame(&frame),
-            Item::Measurement(m) => self.measurement(&m),
+            Item::Measurement(m) => self.measurement(*m),
             Item::Link(e) => self.link(&e),
             Item::Log(e) => self.write_log_event(&e),
             Item::Stats(record) => self.stats(&record),
@@ -243,7 +243,7 @@ impl Writer {
         self.buf = buf;
     }
 
-    fn measurement(&mut self, item: &MeasurementItem) {
+    fn measurement(&mut self, item: MeasurementItem) {
         let m = &item.measurement;
         let (seq, t) = (m.seq, m.capture_time_ns);
         let mut buf = std::mem::take(&mut self.buf);
@@ -253,7 +253,7 @@ impl Writer {
         let record = ReadyRecord {
             seq,
             capture_time_ns: t,
-            json: item.detection_json.clone(),
+            json: item.detection_json,
         };
         // Records with latency stamps (from `run`) of detected frames wait
         // for their pose to be sent; the rest are complete now.

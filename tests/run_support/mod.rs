@@ -206,6 +206,44 @@ pub fn spawn_run(args: &[String], stderr_file: &Path) -> Child {
         .expect("start run")
 }
 
+/// What a `run` against a scripted peer ended with.
+pub struct PeerRun {
+    pub status: std::process::ExitStatus,
+    /// The LANDING_TARGETs the peer received.
+    pub received: Vec<Received>,
+    pub stderr: String,
+}
+
+/// `drogue-vision run` talking MAVLink to `peer`, logging to `logs`, with
+/// `config` laid over the default and `args` before those; ends the peer
+/// once the run has ended (within 60 s) and its last datagrams are in.
+pub fn run_with_peer(
+    args: &[String],
+    peer: Autopilot,
+    logs: &Path,
+    config: &Path,
+    stderr_file: &Path,
+) -> PeerRun {
+    let mut all = args.to_vec();
+    all.extend([
+        "--mavlink".into(),
+        peer.address(),
+        "--log-dir".into(),
+        logs.display().to_string(),
+        "--config".into(),
+        config.display().to_string(),
+    ]);
+    let mut child = spawn_run(&all, stderr_file);
+    let status = wait_with_limit(&mut child, Duration::from_secs(60));
+    // Stragglers still in flight.
+    std::thread::sleep(Duration::from_millis(100));
+    PeerRun {
+        status,
+        received: peer.finish(),
+        stderr: std::fs::read_to_string(stderr_file).unwrap(),
+    }
+}
+
 /// Waits for the child, killing it after `limit`.
 pub fn wait_with_limit(child: &mut Child, limit: Duration) -> std::process::ExitStatus {
     let end = Instant::now() + limit;
