@@ -269,17 +269,29 @@ impl CameraModel {
             return p_px;
         }
         let target = self.to_normalised(p_px);
-        let mut x = target;
+        // Start from the radial model inverted at the distorted radius: one
+        // Newton step fewer than starting from the distorted point.
+        let [k1, k2, _, _, k3] = self.distortion;
+        let r2 = target.norm_squared();
+        let radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3));
+        let mut x = if radial > 0.5 && radial < 2.0 {
+            target / radial
+        } else {
+            target
+        };
         for _ in 0..20 {
             let (xd, j) = self.distort_normalised(x);
             let r = xd - target;
-            if r.norm() < 1e-14 {
+            if r.x * r.x + r.y * r.y < 1e-28 {
                 break;
             }
-            match j.try_inverse() {
-                Some(ji) => x -= ji * r,
-                None => break,
+            // x -= J^-1 r, with the 2x2 inverse written out.
+            let det = j.m11 * j.m22 - j.m12 * j.m21;
+            if !(det.abs() > 1e-300 && det.is_finite()) {
+                break;
             }
+            x.x -= (j.m22 * r.x - j.m12 * r.y) / det;
+            x.y -= (j.m11 * r.y - j.m21 * r.x) / det;
         }
         self.to_pixels(x)
     }
@@ -314,6 +326,41 @@ impl CameraModel {
     pub fn project_px(&self, p_camera_m: &Vector3<f64>) -> Option<[f64; 2]> {
         self.project_undistorted_px(p_camera_m)
             .map(|p| self.distort_px(p))
+    }
+
+    /// Projects a camera-frame point (metres) to distorted image pixels, with
+    /// the image velocity of the point moving along `direction_camera`
+    /// (pixels per metre of travel): the exact derivative of [`Self::project_px`],
+    /// from one distortion evaluation (its Jacobian) instead of two more
+    /// projections for a finite difference. `None` behind the camera.
+    pub fn project_px_with_derivative(
+        &self,
+        p_camera_m: &Vector3<f64>,
+        direction_camera: &Vector3<f64>,
+    ) -> Option<([f64; 2], [f64; 2])> {
+        let z = p_camera_m.z;
+        if z <= 1e-9 {
+            return None;
+        }
+        let n = Vector2::new(p_camera_m.x / z, p_camera_m.y / z);
+        let dn = Vector2::new(
+            (direction_camera.x - n.x * direction_camera.z) / z,
+            (direction_camera.y - n.y * direction_camera.z) / z,
+        );
+        let (nd, dnd) = if self.has_distortion() {
+            let (nd, j) = self.distort_normalised(n);
+            (nd, j * dn)
+        } else {
+            (n, dn)
+        };
+        // K's last row is [0 0 1] (checked in `new`): pixels are affine in nd.
+        let k = &self.k;
+        let p = [
+            k[(0, 0)] * nd.x + k[(0, 1)] * nd.y + k[(0, 2)],
+            k[(1, 1)] * nd.y + k[(1, 2)],
+        ];
+        let dp = [k[(0, 0)] * dnd.x + k[(0, 1)] * dnd.y, k[(1, 1)] * dnd.y];
+        Some((p, dp))
     }
 }
 
@@ -392,5 +439,41 @@ mod tests {
         let ray = c.ray_camera(u);
         assert!((ray - p / 5.0).norm() < 1e-12);
         assert!(c.project_px(&Vector3::new(0.0, 0.0, -1.0)).is_none());
+    }
+
+    #[test]
+    fn projection_derivative_matches_a_finite_difference() {
+        let ros = CameraModel::from_yaml_str(ROS, "ros.yaml").expect("ros");
+        let mut k = ros.k;
+        k[(0, 1)] = 2.5; // skew, so that every term of K is exercised
+        let skewed = CameraModel::new("skew", 1280, 960, k, ros.distortion).expect("camera");
+        let pinhole = CameraModel::new("pinhole", 1280, 960, ros.k, [0.0; 5]).expect("camera");
+        let dir = Vector3::new(0.3, -0.7, 0.2).normalize();
+        for cam in [&ros, &skewed, &pinhole] {
+            for p in [
+                Vector3::new(0.5, -0.25, 5.0),
+                Vector3::new(-1.2, 0.8, 2.0),
+                Vector3::new(0.0, 0.0, 1.0),
+            ] {
+                let (q, dq) = cam.project_px_with_derivative(&p, &dir).expect("in front");
+                let at = cam.project_px(&p).expect("in front");
+                assert!((q[0] - at[0]).abs() < 1e-9 && (q[1] - at[1]).abs() < 1e-9);
+                let h = 1e-5;
+                let ahead = cam.project_px(&(p + h * dir)).expect("in front");
+                let behind = cam.project_px(&(p - h * dir)).expect("in front");
+                for i in 0..2 {
+                    let numeric = (ahead[i] - behind[i]) / (2.0 * h);
+                    assert!(
+                        (dq[i] - numeric).abs() < 1e-4 * numeric.abs().max(1.0),
+                        "{}: {dq:?} vs {numeric}",
+                        cam.name
+                    );
+                }
+            }
+        }
+        assert!(
+            ros.project_px_with_derivative(&Vector3::new(0.0, 0.0, -1.0), &dir)
+                .is_none()
+        );
     }
 }

@@ -42,18 +42,24 @@ const MIN_SHARE_IN_IMAGE: f64 = 0.5;
 /// the two predictions are within the search band of each other anyway.
 const MIN_RIM_SIZE_PX: f64 = 4.0;
 
-/// Bilinear grey value at (u, v) (pixel centres at integers), which must be
-/// inside the image: `0 <= u <= width - 1`, `0 <= v <= height - 1`.
-fn grey_inside(raw: &[u8], w: usize, h: usize, u: f64, v: f64) -> f64 {
-    // u, v >= 0, so truncation is the floor (and, unlike f64::floor on the
-    // baseline x86-64 target, not a library call).
-    let (x0, y0) = (u as usize, v as usize);
-    let (fu, fv) = (u - x0 as f64, v - y0 as f64);
-    let (x1, y1) = ((x0 + 1).min(w - 1), (y0 + 1).min(h - 1));
-    let g = |x: usize, y: usize| f64::from(raw[y * w + x]);
-    let top = g(x0, y0) * (1.0 - fu) + g(x1, y0) * fu;
-    let bottom = g(x0, y1) * (1.0 - fu) + g(x1, y1) * fu;
-    top * (1.0 - fv) + bottom * fv
+/// Sub-pixel resolution of the profile's sample positions: 1/256 pixel.
+const FIXED_ONE: i32 = 256;
+
+/// Bilinear grey value (times `FIXED_ONE`^2) at the fixed-point position
+/// (`u`, `v`) in 1/`FIXED_ONE` pixels (pixel centres at multiples of it),
+/// which must be inside the image: `0 <= u <= (width - 1) * FIXED_ONE`, and
+/// likewise `v`. Integer arithmetic: a profile is 17 of these, for 120 points
+/// of two predicted rims on every frame.
+fn grey_fixed(raw: &[u8], w: usize, h: usize, u: i32, v: i32) -> i32 {
+    let (x0, y0) = ((u >> 8) as usize, (v >> 8) as usize);
+    let (fu, fv) = (u & (FIXED_ONE - 1), v & (FIXED_ONE - 1));
+    let i = y0 * w + x0;
+    let dx = usize::from(x0 + 1 < w);
+    let dy = if y0 + 1 < h { w } else { 0 };
+    let g = |k: usize| i32::from(raw[k]);
+    let top = g(i) * FIXED_ONE + (g(i + dx) - g(i)) * fu;
+    let bottom = g(i + dy) * FIXED_ONE + (g(i + dy + dx) - g(i + dy)) * fu;
+    top * FIXED_ONE + (bottom - top) * fv
 }
 
 /// Offsets searched across the curve: -SEARCH_PX..=SEARCH_PX.
@@ -84,10 +90,18 @@ fn outward_edge_offset(image: &GrayImage, p: [f64; 2], out: [f64; 2]) -> Option<
         return None;
     }
     let (raw, w, h) = (image.as_raw().as_slice(), w as usize, h as usize);
+    // Fixed-point positions: both ends are inside the image, and rounding
+    // each coordinate to 1/256 px keeps it between the ends' rounded values.
+    let fixed = |x: f64| (x * f64::from(FIXED_ONE)).round() as i32;
+    let (u0, v0) = at(0);
+    let (u1, v1) = at(PROFILE_LEN - 1);
+    let (u0, v0, u1, v1) = (fixed(u0), fixed(v0), fixed(u1), fixed(v1));
+    let last = (PROFILE_LEN - 1) as i32;
     let mut grey = [0.0; PROFILE_LEN];
     for (j, g) in grey.iter_mut().enumerate() {
-        let (u, v) = at(j);
-        *g = grey_inside(raw, w, h, u, v);
+        let j = j as i32;
+        let (u, v) = (u0 + (u1 - u0) * j / last, v0 + (v1 - v0) * j / last);
+        *g = f64::from(grey_fixed(raw, w, h, u, v)) / f64::from(FIXED_ONE * FIXED_ONE);
     }
     // Central difference over 2 px at each searched offset.
     let mut gradient = [0.0; SEARCH_STEPS];
@@ -110,6 +124,18 @@ fn outward_edge_offset(image: &GrayImage, p: [f64; 2], out: [f64; 2]) -> Option<
         }
     }
     Some(Some(offset))
+}
+
+/// (cos t, sin t) of the `SAMPLES` points along the rim, computed once.
+fn rim_directions() -> &'static [(f64, f64); SAMPLES] {
+    static TABLE: std::sync::OnceLock<[(f64, f64); SAMPLES]> = std::sync::OnceLock::new();
+    TABLE.get_or_init(|| {
+        std::array::from_fn(|k| {
+            let t = k as f64 * std::f64::consts::TAU / SAMPLES as f64;
+            let (s, c) = t.sin_cos();
+            (c, s)
+        })
+    })
 }
 
 /// Image evidence (0..1) that the canopy's outer rim, a circle of
@@ -138,8 +164,6 @@ pub fn canopy_support(
     };
     let e1 = n.cross(&helper).normalize();
     let e2 = n.cross(&e1);
-    // Slightly inside and outside the rim, to get the image's outward direction.
-    let delta = 0.02 * canopy_radius_m;
 
     let (mut judged, mut with_edge) = (0usize, 0usize);
     let (mut min_u, mut max_u, mut min_v, mut max_v) = (
@@ -148,19 +172,17 @@ pub fn canopy_support(
         f64::INFINITY,
         f64::NEG_INFINITY,
     );
-    for k in 0..SAMPLES {
-        let t = k as f64 * std::f64::consts::TAU / SAMPLES as f64;
-        let radial = t.cos() * e1 + t.sin() * e2;
-        let point = |r: f64| camera.project_px(&(pose.centre_camera_m + r * radial));
-        let (Some(p), Some(p_in), Some(p_out)) = (
-            point(canopy_radius_m),
-            point(canopy_radius_m - delta),
-            point(canopy_radius_m + delta),
+    for &(cos_t, sin_t) in rim_directions() {
+        let radial = cos_t * e1 + sin_t * e2;
+        // The image's outward direction is where the rim point moves as the
+        // radius grows: the projection's derivative along `radial`.
+        let Some((p, d)) = camera.project_px_with_derivative(
+            &(pose.centre_camera_m + canopy_radius_m * radial),
+            &radial,
         ) else {
             continue;
         };
-        let d = [p_out[0] - p_in[0], p_out[1] - p_in[1]];
-        let len = d[0].hypot(d[1]);
+        let len = (d[0] * d[0] + d[1] * d[1]).sqrt();
         if !(len > 0.0 && len.is_finite()) {
             continue;
         }
