@@ -63,6 +63,10 @@ pub struct RunConfig {
     /// `mavlink`: frames are captured this long before they are rendered, so
     /// the autopilot's pose at the capture is interpolated, not extrapolated.
     pub vehicle_pose_delay_ms: u64,
+    /// Real-time priority (SCHED_FIFO, 1-99) of the threads on the capture ->
+    /// send path (capture, measurement, link); 0: normal scheduling. Needs
+    /// CAP_SYS_NICE or an RLIMIT_RTPRIO that allows it.
+    pub realtime_priority: u8,
 }
 
 /// `[run] vehicle_pose`: who flies the simulated receiver.

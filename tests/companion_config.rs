@@ -54,6 +54,7 @@ fn companion_config_is_valid_and_says_what_it_should() {
         assert!(path.is_absolute(), "{} is relative", path.display());
     }
     assert!(c.link.signing_require);
+    assert!((1..=99).contains(&c.run.realtime_priority));
     // Files on an SD card: small, frequent enough to lose little.
     assert!(c.log.rotate_size_mib > 0 && c.log.rotate_size_mib <= 1024);
     assert!(c.log.rotate_duration_s > 0 && c.log.rotate_duration_s <= 600);
@@ -74,6 +75,11 @@ fn service_runs_the_companion_config_and_stops_cleanly() {
     );
     // SIGINT is the clean stop that finishes the MCAP file.
     assert_eq!(one("KillSignal"), "SIGINT");
+    // The service user may take the configured real-time priority.
+    assert_eq!(
+        one("LimitRTPRIO").parse::<u8>().ok(),
+        Some(c.run.realtime_priority)
+    );
     assert_eq!(one("Restart"), "on-failure");
     assert!(one("RestartSec").parse::<u32>().unwrap() > 0);
     // Long enough for a frame wait to end and the log to be finished.

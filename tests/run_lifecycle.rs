@@ -121,3 +121,51 @@ fn sigkill_leaves_a_log_readable_to_its_last_second() {
     assert!(complete);
     assert_eq!(recovered_frames, frames);
 }
+
+/// `[run] realtime_priority`: out of range is a setup error (exit 2) naming
+/// the key; in range, the three latency-path threads are made SCHED_FIFO
+/// where the process may (root here, as in CI), and otherwise the run warns
+/// and goes on.
+#[test]
+fn realtime_priority_is_applied_or_refused_with_a_warning() {
+    let tmp = tempfile::tempdir().unwrap();
+    let bad = tmp.path().join("bad.toml");
+    std::fs::write(&bad, "[run]\nrealtime_priority = 120\n").unwrap();
+    let out = Command::new(BIN)
+        .args(["run", "--config"])
+        .arg(&bad)
+        .args(["--mavlink", "udpout:127.0.0.1:9", "--log-dir"])
+        .arg(tmp.path().join("unused"))
+        .output()
+        .expect("run");
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("realtime_priority = 120"), "{err}");
+
+    let good = tmp.path().join("good.toml");
+    std::fs::write(&good, "[run]\nrealtime_priority = 10\n").unwrap();
+    let out = Command::new(BIN)
+        .args(["run", "--max-frames", "20", "--config"])
+        .arg(&good)
+        .args(["--mavlink", "udpout:127.0.0.1:9", "--log-dir"])
+        .arg(tmp.path().join("logs"))
+        .env("RUST_LOG", "info")
+        .output()
+        .expect("run");
+    assert_eq!(out.status.code(), Some(0));
+    let err = String::from_utf8_lossy(&out.stderr);
+    // SAFETY: geteuid has no preconditions.
+    let root = unsafe { libc::geteuid() } == 0;
+    for thread in ["capture", "measurement", "link"] {
+        let applied = format!("{thread} thread: SCHED_FIFO priority 10");
+        let refused = format!("{thread} thread stays at normal priority");
+        if root {
+            assert!(err.contains(&applied), "{thread}: {err}");
+        } else {
+            assert!(
+                err.contains(&refused) || err.contains(&applied),
+                "{thread}: {err}"
+            );
+        }
+    }
+}

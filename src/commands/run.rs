@@ -430,21 +430,36 @@ fn watch_signals(rt: &tokio::runtime::Runtime, stop: Arc<AtomicBool>) {
     });
 }
 
+/// Makes the calling thread real-time (`[run] realtime_priority`, 0: off).
+/// A refusal is a warning: the run goes on at normal priority.
+fn realtime_if_asked(thread: &str, priority: u8) {
+    if priority == 0 {
+        return;
+    }
+    match crate::priority::make_this_thread_realtime(priority) {
+        Ok(()) => tracing::info!("{thread} thread: SCHED_FIFO priority {priority}"),
+        Err(e) => tracing::warn!("{thread} thread stays at normal priority: {e}"),
+    }
+}
+
 /// The measurement thread: every frame it gets is measured, handed to the
-/// link (latest-wins) and logged.
+/// link (latest-wins) and logged, and counted in `counts` (the run's summary
+/// and its resource meters).
 fn spawn_measurement(
     mut measurer: Measurer,
     mount: Mount,
     link: LinkHandle,
     log: LogHandle,
-    counts: Arc<Mutex<RunSummary>>,
-    meters: Arc<PipelineMeters>,
+    counts: (Arc<Mutex<RunSummary>>, Arc<PipelineMeters>),
     handed_to_link: Option<std::sync::mpsc::Sender<u64>>,
+    realtime_priority: u8,
 ) -> (SyncSender<Arc<Frame>>, std::thread::JoinHandle<()>) {
+    let (counts, meters) = counts;
     // Capacity 1: at most one frame waits; a newer one finding it full is
     // skipped for measurement (still logged), so latency never builds up.
     let (tx, rx) = sync_channel::<Arc<Frame>>(1);
     let handle = std::thread::spawn(move || {
+        realtime_if_asked("measurement", realtime_priority);
         for frame in rx {
             let m = Arc::new(measurer.measure(&frame));
             let measured_ns = unix_now_ns();
@@ -499,6 +514,12 @@ pub fn run(
         .parse()
         .map_err(|e: crate::source::SourceError| RunError::Setup(e.to_string()))?;
     let vehicle_pose = args.vehicle_pose.unwrap_or(config.run.vehicle_pose);
+    let priority = config.run.realtime_priority;
+    if priority > 99 {
+        return Err(RunError::Setup(format!(
+            "[run] realtime_priority = {priority}: 0 (off) or 1-99"
+        )));
+    }
     let mut frames_in = open_frames(&spec, vehicle_pose, args, &config)?;
     let camera = choose_camera(frames_in.source(), args, &config)?;
     let mut config = config;
@@ -509,8 +530,10 @@ pub fn run(
     let measurer =
         Measurer::new(camera.clone(), &config).map_err(|e| RunError::Setup(e.to_string()))?;
 
+    // The link's thread is on the latency path too (it writes each pose).
     let rt = tokio::runtime::Builder::new_multi_thread()
         .worker_threads(1)
+        .on_thread_start(move || realtime_if_asked("link", priority))
         .enable_all()
         .build()
         .map_err(|e| RunError::Setup(format!("tokio runtime: {e}")))?;
@@ -576,9 +599,9 @@ pub fn run(
         mount,
         link.clone(),
         log.clone(),
-        Arc::clone(&counts),
-        Arc::clone(&meters),
+        (Arc::clone(&counts), Arc::clone(&meters)),
         yield_to_measurement.then_some(handed_tx),
+        config.run.realtime_priority,
     );
 
     // Sources with a timeline (sim, log) are replayed at its pace unless
@@ -599,6 +622,9 @@ pub fn run(
         Frames::Source(_) => true,
     };
     let paced = frames_in.source().recorded_timeline() && !args.fast;
+    // This thread takes each frame from the source (a camera's dequeue, the
+    // pacer's wake-up at a frame's due time) and hands it on.
+    realtime_if_asked("capture", priority);
     let mut pacer = Pacer::start();
     let max_frames = args.max_frames.unwrap_or(u64::MAX);
     let (mut frames, mut skipped, mut unreadable) = (0u64, 0u64, 0u64);
