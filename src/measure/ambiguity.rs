@@ -96,28 +96,46 @@ fn outward_edge_offset(image: &GrayImage, p: [f64; 2], out: [f64; 2]) -> Option<
     let (u0, v0) = at(0);
     let (u1, v1) = at(PROFILE_LEN - 1);
     let (u0, v0, u1, v1) = (fixed(u0), fixed(v0), fixed(u1), fixed(v1));
-    let last = (PROFILE_LEN - 1) as i32;
-    let mut grey = [0.0; PROFILE_LEN];
+    // PROFILE_LEN - 1 = 2^SHIFT steps: sample j sits at the convex
+    // combination (u0 * (16 - j) + u1 * j) / 16, a non-negative value floored
+    // by the shift, so it lies between the ends.
+    const SHIFT: u32 = (PROFILE_LEN - 1).trailing_zeros();
+    const _: () = assert!(1 << SHIFT == PROFILE_LEN - 1);
+    // Grey levels in units of 1/FIXED_ONE^2, exact integers.
+    let mut grey = [0i32; PROFILE_LEN];
     for (j, g) in grey.iter_mut().enumerate() {
         let j = j as i32;
-        let (u, v) = (u0 + (u1 - u0) * j / last, v0 + (v1 - v0) * j / last);
-        *g = f64::from(grey_fixed(raw, w, h, u, v)) / f64::from(FIXED_ONE * FIXED_ONE);
+        let (u, v) = (
+            ((u0 << SHIFT) + (u1 - u0) * j) >> SHIFT,
+            ((v0 << SHIFT) + (v1 - v0) * j) >> SHIFT,
+        );
+        *g = grey_fixed(raw, w, h, u, v);
     }
-    // Central difference over 2 px at each searched offset.
-    let mut gradient = [0.0; SEARCH_STEPS];
+    // Central difference over 2 px at each searched offset, in units of
+    // 1 / (2 FIXED_ONE^2) grey levels per pixel (exact).
+    let mut gradient = [0i32; SEARCH_STEPS];
     for (i, g) in gradient.iter_mut().enumerate() {
-        *g = (grey[i + 2 * STEPS_PER_PX] - grey[i]) / 2.0;
+        *g = grey[i + 2 * STEPS_PER_PX] - grey[i];
     }
-    let (i_best, &best) = gradient
-        .iter()
-        .enumerate()
-        .max_by(|a, b| a.1.total_cmp(b.1))?;
-    if best < MIN_EDGE_GREY_PER_PX {
+    let per_grey_per_px = 2.0 * f64::from(FIXED_ONE * FIXED_ONE);
+    // The strongest; the last of equals, as Iterator::max_by.
+    let mut i_best = 0;
+    for (i, g) in gradient.iter().enumerate() {
+        if *g >= gradient[i_best] {
+            i_best = i;
+        }
+    }
+    let best = f64::from(gradient[i_best]);
+    if best < MIN_EDGE_GREY_PER_PX * per_grey_per_px {
         return Some(None);
     }
     let mut offset = i_best as f64 * SEARCH_STEP_PX - SEARCH_PX;
     if i_best > 0 && i_best + 1 < SEARCH_STEPS {
-        let (l, c, r) = (gradient[i_best - 1], best, gradient[i_best + 1]);
+        let (l, c, r) = (
+            f64::from(gradient[i_best - 1]),
+            best,
+            f64::from(gradient[i_best + 1]),
+        );
         let curvature = l - 2.0 * c + r;
         if curvature < 0.0 {
             offset += 0.5 * (l - r) / curvature * SEARCH_STEP_PX;
