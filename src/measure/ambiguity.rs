@@ -44,6 +44,9 @@ const MIN_RIM_SIZE_PX: f64 = 4.0;
 
 /// Sub-pixel resolution of the profile's sample positions: 1/256 pixel.
 const FIXED_ONE: i32 = 256;
+/// Largest image side whose positions, times `FIXED_ONE` and times the 16
+/// steps of a profile, fit an i32.
+const MAX_FIXED_SIDE: u32 = 1 << 18;
 
 /// Bilinear grey value (times `FIXED_ONE`^2) at the fixed-point position
 /// (`u`, `v`) in 1/`FIXED_ONE` pixels (pixel centres at multiples of it),
@@ -86,6 +89,10 @@ fn outward_edge_offset(image: &GrayImage, p: [f64; 2], out: [f64; 2]) -> Option<
     let inside = |(u, v): (f64, f64)| {
         u >= 0.0 && v >= 0.0 && u <= f64::from(w) - 1.0 && v <= f64::from(h) - 1.0
     };
+    // Larger images would overflow the i32 fixed-point positions below.
+    if w > MAX_FIXED_SIDE || h > MAX_FIXED_SIDE {
+        return None;
+    }
     if !(inside(at(0)) && inside(at(PROFILE_LEN - 1))) {
         return None;
     }
