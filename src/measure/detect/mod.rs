@@ -104,6 +104,26 @@ struct Seed {
     reach: f64,
 }
 
+impl Seed {
+    /// Nearly the same seed: centres within a tenth of the smaller radius,
+    /// axes within 10 %, the same reach, and (unless both are near-circles)
+    /// the same orientation within 0.1 rad.
+    fn same_as(&self, other: &Seed) -> bool {
+        let close = |x: f64, y: f64| (x / y - 1.0).abs() <= 0.1;
+        let r = self.b_px.min(other.b_px);
+        let d =
+            (self.centre_px[0] - other.centre_px[0]).hypot(self.centre_px[1] - other.centre_px[1]);
+        let round = |s: &Seed| s.a_px <= 1.1 * s.b_px;
+        let dtheta = (self.theta - other.theta).rem_euclid(std::f64::consts::PI);
+        let aligned = dtheta.min(std::f64::consts::PI - dtheta) <= 0.1;
+        self.reach == other.reach
+            && d <= 0.1 * r
+            && close(self.a_px, other.a_px)
+            && close(self.b_px, other.b_px)
+            && ((round(self) && round(other)) || aligned)
+    }
+}
+
 /// A verified candidate.
 struct Verified {
     ellipse: Ellipse,
@@ -244,6 +264,7 @@ impl Detector {
             }
         }
         let mut best: Option<Verified> = None;
+        let mut tried: Vec<Seed> = Vec::new();
         for (i, b) in kept.iter().enumerate() {
             // Two seeds: the centroid with the moment ellipse, and the
             // deepest point with its inscribed circle (on the disc even when
@@ -280,6 +301,12 @@ impl Detector {
                 });
             }
             for (j, seed) in seeds.iter().enumerate() {
+                // The same region at another threshold often gives nearly
+                // the same seed: its rays would find the same edges.
+                if tried.iter().any(|t| t.same_as(seed)) {
+                    continue;
+                }
+                tried.push(seed.clone());
                 let r = self.verify_seed(image, seed, 3 * i as u64 + j as u64);
                 if let Some(v) = r
                     && best.as_ref().is_none_or(|bv| v.score > bv.score)
@@ -306,6 +333,7 @@ impl Detector {
 
     /// Verifies a coarse seed: a wide ray pass from its centre, a robust
     /// fit, then the narrow pass around that fit.
+    #[inline(never)]
     fn verify_seed(&mut self, image: &GrayImage, seed: &Seed, index: u64) -> Option<Verified> {
         let rays = 48;
         let mut points = Vec::with_capacity(rays);
