@@ -20,6 +20,7 @@ pub struct Decimated {
 impl Decimated {
     /// Averages `factor` x `factor` blocks (partial blocks at the right and
     /// bottom edges are dropped).
+    #[inline(never)]
     pub fn update(&mut self, image: &GrayImage, factor: usize) {
         // u16 column sums hold up to 257 rows of 255.
         let factor = factor.clamp(1, 256);
@@ -27,8 +28,12 @@ impl Decimated {
         self.factor = factor;
         self.width = w / factor;
         self.height = h / factor;
-        self.pixels.clear();
-        self.pixels.resize(self.width * self.height, 0);
+        // Every pixel is written below: no need to zero a buffer of the
+        // right size.
+        if self.pixels.len() != self.width * self.height {
+            self.pixels.clear();
+            self.pixels.resize(self.width * self.height, 0);
+        }
         if self.width == 0 || self.height == 0 {
             return;
         }
@@ -139,8 +144,10 @@ fn percentile(pixels: &[u8], fraction: f64) -> u8 {
 /// Scratch for the labelling.
 #[derive(Clone, Default)]
 pub struct BlobFinder {
-    /// The label image of each pass (highest threshold first).
+    /// The label image of each pass (highest threshold first), and its
+    /// width: only the runs of the previous frame are cleared in it.
     labels: Vec<Vec<u32>>,
+    label_widths: Vec<usize>,
     /// The dark runs of each pass, in raster order, with their labels.
     runs: Vec<Vec<Run>>,
     moments: Vec<RegionMoments>,
@@ -229,6 +236,7 @@ impl BlobFinder {
     /// the median level. Regions smaller than `min_area` decimated pixels are
     /// dropped. Returns nothing when the image has less than
     /// `min_contrast` gray levels between its darkest and median level.
+    #[inline(never)]
     pub fn find(
         &mut self,
         img: &Decimated,
@@ -250,6 +258,7 @@ impl BlobFinder {
         let mut order: Vec<usize> = (0..fractions.len()).collect();
         order.sort_by(|&i, &j| fractions[j].total_cmp(&fractions[i]));
         self.labels.resize_with(order.len(), Vec::new);
+        self.label_widths.resize(order.len(), 0);
         self.runs.resize_with(order.len(), Vec::new);
         for (pass, &level) in order.iter().enumerate() {
             let threshold = lo + fractions[level] * (hi - lo);
@@ -286,6 +295,19 @@ impl BlobFinder {
         let (w, h) = (img.width, img.height);
         // Integer levels: p <= threshold exactly when p <= floor(threshold).
         let level = threshold.floor().clamp(-1.0, 255.0) as i32;
+        // The label image is all zeros but for the previous runs of this
+        // pass (when it has the same size): clear those, not the whole image.
+        let labels = &mut self.labels[pass];
+        if labels.len() == w * h && self.label_widths[pass] == w {
+            for run in &self.runs[pass] {
+                let row = run.y as usize * w;
+                labels[row + run.x0 as usize..row + run.x1 as usize].fill(0);
+            }
+        } else {
+            labels.clear();
+            labels.resize(w * h, 0);
+            self.label_widths[pass] = w;
+        }
         self.find_runs(img, level, pass);
         let runs = &mut self.runs[pass];
 
@@ -313,8 +335,6 @@ impl BlobFinder {
         }
 
         let labels = &mut self.labels[pass];
-        labels.clear();
-        labels.resize(w * h, 0);
         for run in runs.iter() {
             let row = run.y as usize * w;
             labels[row + run.x0 as usize..row + run.x1 as usize].fill(run.label);
@@ -421,6 +441,7 @@ impl BlobFinder {
     /// and a pixel around it, kept with a ring of zeros so the passes need
     /// no bounds checks. The nearest outside pixel of a region is always
     /// one of its light 8-neighbours, so its own box is all it takes.
+    #[inline(never)]
     pub fn describe_core(&mut self, img: &Decimated, blob: &mut Blob) {
         let (w, h) = (img.width, img.height);
         let Some(labels) = self.labels.get(blob.pass) else {
@@ -701,6 +722,47 @@ mod tests {
                     assert!((b.centre_px[0] - centre[0]).abs() < 1e-9);
                     assert!((b.centre_px[1] - centre[1]).abs() < 1e-9);
                 }
+            }
+        }
+    }
+
+    #[test]
+    fn a_reused_finder_labels_as_a_new_one() {
+        // The label images are cleared run by run between frames: a finder
+        // that has seen other frames (and other sizes) finds the same blobs,
+        // cores and ringed points as a fresh one.
+        let disc = |w: u32, h: u32, cx: f64, cy: f64, r: f64| {
+            GrayImage::from_fn(w, h, |x, y| {
+                let d = (x as f64 - cx).hypot(y as f64 - cy);
+                Luma([
+                    if d <= r || (x as f64 > cx && (y as f64 - cy).abs() < 6.0) {
+                        30
+                    } else {
+                        180
+                    },
+                ])
+            })
+        };
+        let frames = [
+            disc(320, 240, 150.0, 100.0, 30.0),
+            disc(320, 240, 90.0, 160.0, 45.0),
+            disc(240, 320, 100.0, 200.0, 25.0),
+            disc(320, 240, 200.0, 60.0, 20.0),
+        ];
+        let mut reused = BlobFinder::default();
+        for (k, img) in frames.iter().enumerate() {
+            let mut dec = Decimated::default();
+            dec.update(img, 4);
+            let (mut a, mut b) = (Vec::new(), Vec::new());
+            let mut fresh = BlobFinder::default();
+            fresh.find(&dec, &[0.15, 0.3, 0.5], 2, 10.0, &mut a);
+            reused.find(&dec, &[0.15, 0.3, 0.5], 2, 10.0, &mut b);
+            assert!(!a.is_empty(), "frame {k}");
+            assert_eq!(a.len(), b.len(), "frame {k}");
+            for (x, y) in a.iter_mut().zip(b.iter_mut()) {
+                fresh.describe_core(&dec, x);
+                reused.describe_core(&dec, y);
+                assert_eq!(format!("{x:?}"), format!("{y:?}"), "frame {k}");
             }
         }
     }

@@ -4,7 +4,7 @@
 //! module's job: this one only has to be right to a fraction of a pixel.
 
 use crate::measure::ellipse::{Conic, Ellipse};
-use nalgebra::{Matrix3, Matrix5, Matrix6, Vector5, Vector6};
+use nalgebra::{Matrix3, Matrix5, Matrix6, Vector5};
 use rand::Rng;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -31,11 +31,28 @@ pub fn fit_conic(points: &[[f64; 2]]) -> Option<Conic> {
         return None;
     }
     let s = 1.0 / rms;
-    let mut scatter = Matrix6::<f64>::zeros();
+    // The upper triangle of the scatter matrix, mirrored: the same products
+    // summed in the same order as the full outer products (x y = y x exactly).
+    let mut upper = [0.0f64; 21];
     for p in points {
         let (x, y) = ((p[0] - mx) * s, (p[1] - my) * s);
-        let row = Vector6::new(x * x, x * y, y * y, x, y, 1.0);
-        scatter += row * row.transpose();
+        let row = [x * x, x * y, y * y, x, y, 1.0];
+        let mut k = 0;
+        for i in 0..6 {
+            for j in i..6 {
+                upper[k] += row[i] * row[j];
+                k += 1;
+            }
+        }
+    }
+    let mut scatter = Matrix6::<f64>::zeros();
+    let mut k = 0;
+    for i in 0..6 {
+        for j in i..6 {
+            scatter[(i, j)] = upper[k];
+            scatter[(j, i)] = upper[k];
+            k += 1;
+        }
     }
     let eig = scatter.symmetric_eigen();
     let (imin, _) = eig

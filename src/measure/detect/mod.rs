@@ -93,6 +93,9 @@ pub struct RimCandidate {
 /// configured spacing.
 const SCOUT_SPACING_FACTOR: f64 = 3.0;
 
+/// Samples per seed radius on the rays of a seed's wide first pass.
+const WIDE_STEPS_PER_RADIUS: f64 = 40.0;
+
 /// Where and how large a coarse candidate is, full-res distorted pixels.
 #[derive(Clone, Debug)]
 struct Seed {
@@ -102,6 +105,41 @@ struct Seed {
     theta: f64,
     /// How far the first ray pass looks, in multiples of the seed's radius.
     reach: f64,
+}
+
+impl Seed {
+    /// Nearly the same seed: centres within a tenth of the smaller radius,
+    /// axes within 10 %, the same reach, and (unless both are near-circles)
+    /// the same orientation within 0.1 rad.
+    fn same_as(&self, other: &Seed) -> bool {
+        let close = |x: f64, y: f64| (x / y - 1.0).abs() <= 0.1;
+        let r = self.b_px.min(other.b_px);
+        let d =
+            (self.centre_px[0] - other.centre_px[0]).hypot(self.centre_px[1] - other.centre_px[1]);
+        let round = |s: &Seed| s.a_px <= 1.1 * s.b_px;
+        let dtheta = (self.theta - other.theta).rem_euclid(std::f64::consts::PI);
+        let aligned = dtheta.min(std::f64::consts::PI - dtheta) <= 0.1;
+        self.reach == other.reach
+            && d <= 0.1 * r
+            && close(self.a_px, other.a_px)
+            && close(self.b_px, other.b_px)
+            && ((round(self) && round(other)) || aligned)
+    }
+}
+
+/// One narrow rim pass around an ellipse, before its canopy evidence.
+struct RimPass {
+    ellipse: Ellipse,
+    /// The rays' origin, distorted pixels.
+    centre: [f64; 2],
+    points_px: Vec<[f64; 2]>,
+    residuals: Vec<f64>,
+    inliers: Vec<usize>,
+    /// Direction and edge distance of each point's ray.
+    dirs: Vec<([f64; 2], f64)>,
+    rim_contrast: f64,
+    /// Share of the rays in the image with their edge on the ellipse.
+    shape: f64,
 }
 
 /// A verified candidate.
@@ -244,6 +282,7 @@ impl Detector {
             }
         }
         let mut best: Option<Verified> = None;
+        let mut tried: Vec<Seed> = Vec::new();
         for (i, b) in kept.iter().enumerate() {
             // Two seeds: the centroid with the moment ellipse, and the
             // deepest point with its inscribed circle (on the disc even when
@@ -280,6 +319,12 @@ impl Detector {
                 });
             }
             for (j, seed) in seeds.iter().enumerate() {
+                // The same region at another threshold often gives nearly
+                // the same seed: its rays would find the same edges.
+                if tried.iter().any(|t| t.same_as(seed)) {
+                    continue;
+                }
+                tried.push(seed.clone());
                 let r = self.verify_seed(image, seed, 3 * i as u64 + j as u64);
                 if let Some(v) = r
                     && best.as_ref().is_none_or(|bv| v.score > bv.score)
@@ -306,6 +351,7 @@ impl Detector {
 
     /// Verifies a coarse seed: a wide ray pass from its centre, a robust
     /// fit, then the narrow pass around that fit.
+    #[inline(never)]
     fn verify_seed(&mut self, image: &GrayImage, seed: &Seed, index: u64) -> Option<Verified> {
         let rays = 48;
         let mut points = Vec::with_capacity(rays);
@@ -318,11 +364,12 @@ impl Detector {
             let r = polar_radius(seed.a_px, seed.b_px, seed.theta, phi).min(longest);
             let dir = [phi.cos(), phi.sin()];
             let s_max = seed.reach * r + 4.0;
-            // About a pixel of accuracy on a small seed, a percent of its
-            // size on a large one, is enough here (the narrow passes
-            // refine it): a fixed number of steps per radius, so that a
-            // large dark region (cloud, shadow) costs no more than a disc.
-            let step = (r / 40.0).max(0.5);
+            // About a pixel of accuracy on a small seed, a few percent of
+            // its size on a large one, is enough here (the narrow passes,
+            // 10 % of the radius wide, refine it): a fixed number of steps
+            // per radius, so that a large dark region (cloud, shadow) costs
+            // no more than a disc.
+            let step = (r / WIDE_STEPS_PER_RADIUS).max(0.5);
             rim::profile(image, c, dir, 1.0, s_max, step, &mut self.profile);
             if let Some(e) =
                 rim::strongest_rise(&self.profile, 1.0, step, self.cfg.min_contrast_gray as f32)
@@ -375,8 +422,7 @@ impl Detector {
     }
 
     /// Narrow ray pass around an ellipse (undistorted pixels), robust refit,
-    /// and the evidence score.
-    /// [`Self::verify_near`], repeated from its own result while that moves
+    /// and the evidence score: [`Self::rim_pass`], repeated from its own result while that moves
     /// by more than half a pixel (the narrow search is centred on the start
     /// ellipse: a start a few pixels off gives edges near the window's ends).
     fn verify_settled(
@@ -386,25 +432,29 @@ impl Detector {
         spacing_px: f64,
         max_points: u32,
     ) -> Option<Verified> {
-        let mut v = self.verify_near(image, start, spacing_px, max_points)?;
+        // The canopy evidence (a second ray pass) is looked at only on the
+        // pass that is kept: a pass that moves the ellipse is followed by
+        // another one.
         let mut previous = *start;
-        for _ in 0..2 {
-            if v.ellipse.max_param_error_px(&previous) <= 0.5 {
-                break;
+        for round in 0..3 {
+            let pass = self.rim_pass(image, &previous, spacing_px, max_points)?;
+            if round == 2 || pass.ellipse.max_param_error_px(&previous) <= 0.5 {
+                return self.score(image, pass);
             }
-            previous = v.ellipse;
-            v = self.verify_near(image, &previous, spacing_px, max_points)?;
+            previous = pass.ellipse;
         }
-        Some(v)
+        None
     }
 
-    fn verify_near(
+    /// The narrow ray pass around `start` and the robust refit, with the
+    /// checks of the rim itself (size, shape, contrast, one dark inside).
+    fn rim_pass(
         &mut self,
         image: &GrayImage,
         start: &Ellipse,
         spacing_px: f64,
         max_points: u32,
-    ) -> Option<Verified> {
+    ) -> Option<RimPass> {
         let centre = self.camera.distort_px([start.cx, start.cy]);
         let perimeter = TAU * ((start.a * start.a + start.b * start.b) / 2.0).sqrt();
         let rays =
@@ -474,7 +524,34 @@ impl Detector {
             return None;
         }
         let shape = inliers.len() as f64 / rays_in_image as f64;
+        Some(RimPass {
+            ellipse,
+            centre,
+            points_px,
+            residuals,
+            inliers,
+            dirs,
+            rim_contrast,
+            shape,
+        })
+    }
 
+    /// The evidence score of a rim pass (the canopy's outer rim band beyond
+    /// its inlier edges), and the candidate when it is good enough.
+    fn score(&mut self, image: &GrayImage, pass: RimPass) -> Option<Verified> {
+        let RimPass {
+            ellipse,
+            centre,
+            points_px,
+            residuals,
+            inliers,
+            dirs,
+            rim_contrast,
+            shape,
+        } = pass;
+        let tol = self.cfg.inlier_tolerance_px.max(0.1);
+        let (w, h) = (f64::from(image.width()), f64::from(image.height()));
+        let inside = |p: [f64; 2]| p[0] >= 0.0 && p[1] >= 0.0 && p[0] <= w - 1.0 && p[1] <= h - 1.0;
         // Canopy evidence: the outer rim band beyond the inlier edges.
         let [lo_ratio, hi_ratio] = self.cfg.canopy_band_ratio;
         let stride = (inliers.len() / 48).max(1);
