@@ -132,26 +132,34 @@ fn local_optimise(
         residual,
         sorted,
         keep,
+        previous,
     } = scratch;
     keep.clear();
     keep.resize(xy.len(), false);
+    previous.clear();
     residuals(xy, &c.model, residual);
     for _ in 0..cfg.adaptive_refine_rounds {
         if select(residual, c.band, keep) < 5 {
             break;
         }
-        if let Some(e) = taubin::fit_ellipse(xy, Some(keep)).filter(plausible) {
-            c.model = e;
-            let v = to_vector(&e);
-            if finished
-                .iter()
-                .any(|f| super::cluster::distance_sq(f, &v) < duplicate_sq)
-            {
-                return None;
+        // With the same points as the last round, the refit, its residuals
+        // and their sigma would be the same as then (on a clean rim the band
+        // shrinks for several rounds without dropping a point).
+        if *previous != *keep {
+            previous.clone_from(keep);
+            if let Some(e) = taubin::fit_ellipse(xy, Some(keep)).filter(plausible) {
+                c.model = e;
+                let v = to_vector(&e);
+                if finished
+                    .iter()
+                    .any(|f| super::cluster::distance_sq(f, &v) < duplicate_sq)
+                {
+                    return None;
+                }
+                residuals(xy, &c.model, residual);
             }
-            residuals(xy, &c.model, residual);
+            c.sigma = robust_sigma(residual, keep, sorted);
         }
-        c.sigma = robust_sigma(residual, keep, sorted);
         // Shrink to k sigmas, but by at least 30 % a round: a rough model
         // has a large sigma and would otherwise never tighten.
         let next = (cfg.adaptive_inlier_sigmas * c.sigma)
@@ -167,12 +175,13 @@ fn local_optimise(
 }
 
 /// Reused buffers: residuals of every point, the selected ones for the
-/// median, and the selection.
+/// median, and the selection (this round's and the last one's).
 #[derive(Default)]
 struct Scratch {
     residual: Vec<f64>,
     sorted: Vec<f64>,
     keep: Vec<bool>,
+    previous: Vec<bool>,
 }
 
 /// Points used to score class centres and to optimise candidates locally
@@ -311,6 +320,7 @@ pub(crate) fn fit(
         residual: Vec::with_capacity(xy.len()),
         sorted: Vec::with_capacity(xy.len()),
         keep: Vec::with_capacity(xy.len()),
+        previous: Vec::with_capacity(xy.len()),
     };
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let max_subsets = cfg.adaptive_subsets;
