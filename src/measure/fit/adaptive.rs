@@ -22,10 +22,11 @@
 //!    orthogonal-distance (geometric) refinement, the band at k robust
 //!    sigmas (never below a pixel floor), until the inlier set is stable.
 
-use super::algorithm1::subset_ellipses;
 use super::cluster::agglomerate;
-use super::{FitConfig, FitError, Points, geometric, taubin};
+use super::{FitConfig, FitError, Points, geometric, least_squares, taubin};
 use crate::measure::ellipse::Ellipse;
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
 
 /// The scale-free parameter vector of an ellipse (all entries in the
 /// ellipse's own length unit).
@@ -115,25 +116,50 @@ fn local_optimise(
     band: f64,
     cfg: &FitConfig,
     min_band: f64,
-    keep: &mut [bool],
     scratch: &mut Scratch,
+    finished: &[[f64; 5]],
 ) -> Option<Candidate> {
+    // A candidate that comes within this of an earlier candidate's final
+    // model would select the same points and end on the same model: it is
+    // dropped (on a clean rim most candidates end on one model).
+    let duplicate_sq = (DUPLICATE_BAND_SHARE * min_band).powi(2);
     let mut c = Candidate {
         model: *start,
         band,
         sigma: f64::INFINITY,
     };
-    let Scratch { residual, sorted } = scratch;
+    let Scratch {
+        residual,
+        sorted,
+        keep,
+        previous,
+    } = scratch;
+    keep.clear();
+    keep.resize(xy.len(), false);
+    previous.clear();
     residuals(xy, &c.model, residual);
     for _ in 0..cfg.adaptive_refine_rounds {
         if select(residual, c.band, keep) < 5 {
             break;
         }
-        if let Some(e) = taubin::fit_ellipse(xy, Some(keep)).filter(plausible) {
-            c.model = e;
-            residuals(xy, &c.model, residual);
+        // With the same points as the last round, the refit, its residuals
+        // and their sigma would be the same as then (on a clean rim the band
+        // shrinks for several rounds without dropping a point).
+        if *previous != *keep {
+            previous.clone_from(keep);
+            if let Some(e) = taubin::fit_ellipse(xy, Some(keep)).filter(plausible) {
+                c.model = e;
+                let v = to_vector(&e);
+                if finished
+                    .iter()
+                    .any(|f| super::cluster::distance_sq(f, &v) < duplicate_sq)
+                {
+                    return None;
+                }
+                residuals(xy, &c.model, residual);
+            }
+            c.sigma = robust_sigma(residual, keep, sorted);
         }
-        c.sigma = robust_sigma(residual, keep, sorted);
         // Shrink to k sigmas, but by at least 30 % a round: a rough model
         // has a large sigma and would otherwise never tighten.
         let next = (cfg.adaptive_inlier_sigmas * c.sigma)
@@ -148,12 +174,14 @@ fn local_optimise(
     c.sigma.is_finite().then_some(c)
 }
 
-/// Reused buffers: residuals of every point, and the selected ones for the
-/// median.
+/// Reused buffers: residuals of every point, the selected ones for the
+/// median, and the selection (this round's and the last one's).
 #[derive(Default)]
 struct Scratch {
     residual: Vec<f64>,
     sorted: Vec<f64>,
+    keep: Vec<bool>,
+    previous: Vec<bool>,
 }
 
 /// Points used to score class centres and to optimise candidates locally
@@ -167,63 +195,63 @@ fn subsample(xy: &[[f64; 2]], max: usize) -> Vec<[f64; 2]> {
     xy.iter().step_by(stride).copied().collect()
 }
 
-pub(crate) fn fit(
-    pts: &Points,
-    cfg: &FitConfig,
-    seed: u64,
-) -> Result<(Ellipse, Vec<bool>), FitError> {
-    let xy = &pts.xy;
-    let px = pts.scale;
-    // 1-2. Subset ellipses and their scale-aware clustering. In normalised
-    // coordinates the data's RMS radius is 1, so the tolerance
-    // `relative * radius + px` is a constant.
-    let set: Vec<[f64; 5]> =
-        subset_ellipses(pts, cfg.adaptive_subsets, cfg.adaptive_subset_size, seed)
-            .iter()
-            .filter(|e| plausible(e))
-            .map(to_vector)
-            .collect();
-    let tolerance = cfg.adaptive_cluster_relative + cfg.adaptive_cluster_px / px;
-    let clusters = agglomerate(&set, tolerance);
+/// Subsets the RANSAC bound asks for: `log(1 - p) / log(1 - w^n)`, the
+/// number of random `n`-point subsets that hold at least one outlier-free
+/// subset with probability `p` when a share `w` of the points are inliers.
+fn required_subsets(inlier_share: f64, subset_size: usize, confidence: f64) -> usize {
+    let clean = inlier_share.clamp(0.0, 1.0).powi(subset_size as i32);
+    if clean >= 1.0 {
+        return 0;
+    }
+    if clean <= 0.0 {
+        return usize::MAX;
+    }
+    let n = (1.0 - confidence).ln() / (1.0 - clean).ln();
+    if n.is_finite() {
+        n.ceil().max(0.0) as usize
+    } else {
+        usize::MAX
+    }
+}
 
-    // 3. Every class centre (an average of consistent subset fits, eq. 10)
-    // is scored by its support within a wide band on a subsample; the best
-    // few are optimised locally, and the one that then explains the most
-    // points within a common tight band wins. Support, not class size,
-    // decides: with sub-pixel noise, 5-point fits to a partial arc scatter
-    // by more than any useful tolerance, so the true class can be small.
-    let min_band = cfg.adaptive_inlier_min_px / px;
-    let initial_band = cfg.adaptive_initial_band_relative + min_band;
-    let score_pts = subsample(xy, MAX_SCORE_POINTS);
+/// The result of stages 2-3 on the subset vectors drawn so far.
+struct Stage3 {
+    model: Ellipse,
+    band: f64,
+    /// Points of `lo_pts` within the common tight band of the winner.
+    support: usize,
+}
+
+/// Stages 2-3: cluster the subset vectors, score the class centres, optimise
+/// the best few locally and let them compete by consensus.
+#[allow(clippy::too_many_arguments)]
+fn best_candidate(
+    set: &[[f64; 5]],
+    tolerance: f64,
+    score_pts: &[[f64; 2]],
+    lo_pts: &[[f64; 2]],
+    cfg: &FitConfig,
+    initial_band: f64,
+    min_band: f64,
+    scratch: &mut Scratch,
+) -> Option<Stage3> {
+    let clusters = agglomerate(set, tolerance);
     let mut scored: Vec<(usize, usize, Ellipse)> = clusters
         .iter()
         .enumerate()
         .filter_map(|(i, c)| from_vector(&c.centre).map(|e| (i, e)))
-        .map(|(i, e)| (support(&score_pts, &e, initial_band), i, e))
+        .map(|(i, e)| (support(score_pts, &e, initial_band), i, e))
         .collect();
     // Most support first; ties: the bigger class (lower index).
     scored.sort_by(|x, y| y.0.cmp(&x.0).then(x.1.cmp(&y.1)));
-    let lo_pts = subsample(xy, MAX_LO_POINTS);
-    let mut keep = vec![false; xy.len()];
-    let mut scratch = Scratch {
-        residual: Vec::with_capacity(xy.len()),
-        sorted: Vec::with_capacity(xy.len()),
-    };
-    let candidates: Vec<Candidate> = scored
-        .iter()
-        .take(cfg.adaptive_clusters_scored)
-        .filter_map(|(_, _, e)| {
-            local_optimise(
-                &lo_pts,
-                e,
-                initial_band,
-                cfg,
-                min_band,
-                &mut keep[..lo_pts.len()],
-                &mut scratch,
-            )
-        })
-        .collect();
+    let mut candidates: Vec<Candidate> = Vec::with_capacity(cfg.adaptive_clusters_scored);
+    for (_, _, e) in scored.iter().take(cfg.adaptive_clusters_scored) {
+        let finished: Vec<[f64; 5]> = candidates.iter().map(|c| to_vector(&c.model)).collect();
+        if let Some(c) = local_optimise(lo_pts, e, initial_band, cfg, min_band, scratch, &finished)
+        {
+            candidates.push(c);
+        }
+    }
     let best_sigma = candidates
         .iter()
         .map(|c| c.sigma)
@@ -231,18 +259,115 @@ pub(crate) fn fit(
     let score_band = (cfg.adaptive_inlier_sigmas * best_sigma).max(min_band);
     let mut best: Option<(usize, &Candidate)> = None;
     for c in &candidates {
-        let s = support(&lo_pts, &c.model, score_band);
+        let s = support(lo_pts, &c.model, score_band);
         if best.is_none_or(|(b, _)| s > b) {
             best = Some((s, c));
         }
     }
-    let (_, winner) = best.ok_or(FitError::NoEllipse)?;
+    best.map(|(support, c)| Stage3 {
+        model: c.model,
+        band: c.band,
+        support,
+    })
+}
+
+/// A candidate is dropped when it comes within this share of the smallest
+/// inlier band of an earlier candidate's final model.
+const DUPLICATE_BAND_SHARE: f64 = 0.02;
+
+/// Draws `count` more random subsets and appends the parameter vectors of
+/// their plausible ellipses to `set`.
+fn draw_subsets(
+    pts: &Points,
+    rng: &mut ChaCha8Rng,
+    count: usize,
+    size: usize,
+    set: &mut Vec<[f64; 5]>,
+) {
+    let size = size.min(pts.xy.len());
+    for _ in 0..count {
+        let idx = rand::seq::index::sample(rng, pts.xy.len(), size);
+        let conic = least_squares::fit_conic(idx.iter().map(|i| &pts.xy[i]));
+        if let Some(e) = conic
+            .and_then(|c| least_squares::conic_to_ellipse(&c))
+            .filter(plausible)
+        {
+            set.push(to_vector(&e));
+        }
+    }
+}
+
+pub(crate) fn fit(
+    pts: &Points,
+    cfg: &FitConfig,
+    seed: u64,
+) -> Result<(Ellipse, Vec<bool>), FitError> {
+    let xy = &pts.xy;
+    let px = pts.scale;
+    // 1-3. Subset ellipses, their scale-aware clustering, and the best class
+    // centre after local optimisation. In normalised coordinates the data's
+    // RMS radius is 1, so the tolerance `relative * radius + px` is a
+    // constant. The number of subsets adapts: first the floor, then as many
+    // as the RANSAC bound asks for the winner's inlier share (at most
+    // adaptive_subsets), so that a clean rim costs a few dozen subsets and a
+    // rim with many outliers still gets an outlier-free subset.
+    let tolerance = cfg.adaptive_cluster_relative + cfg.adaptive_cluster_px / px;
+    let min_band = cfg.adaptive_inlier_min_px / px;
+    let initial_band = cfg.adaptive_initial_band_relative + min_band;
+    let score_pts = subsample(xy, MAX_SCORE_POINTS);
+    let lo_pts = subsample(xy, MAX_LO_POINTS);
+    let mut scratch = Scratch {
+        residual: Vec::with_capacity(xy.len()),
+        sorted: Vec::with_capacity(xy.len()),
+        keep: Vec::with_capacity(xy.len()),
+        previous: Vec::with_capacity(xy.len()),
+    };
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let max_subsets = cfg.adaptive_subsets;
+    let mut drawn = 0;
+    let mut target = cfg.adaptive_min_subsets.min(max_subsets);
+    let mut set: Vec<[f64; 5]> = Vec::with_capacity(max_subsets);
+    let winner = loop {
+        draw_subsets(
+            pts,
+            &mut rng,
+            target - drawn,
+            cfg.adaptive_subset_size,
+            &mut set,
+        );
+        drawn = target;
+        let found = best_candidate(
+            &set,
+            tolerance,
+            &score_pts,
+            &lo_pts,
+            cfg,
+            initial_band,
+            min_band,
+            &mut scratch,
+        );
+        if drawn >= max_subsets {
+            break found;
+        }
+        let share = found
+            .as_ref()
+            .map_or(0.0, |w| w.support as f64 / lo_pts.len() as f64);
+        let needed = required_subsets(share, cfg.adaptive_subset_size, cfg.adaptive_confidence);
+        if needed <= drawn {
+            break found;
+        }
+        target = needed.min(max_subsets);
+    };
+    let winner = winner.ok_or(FitError::NoEllipse)?;
 
     // 4. The winner on all points: Taubin rounds until the inlier set is
     // stable (cheap), then the geometric refit of that set; if its band
     // then selects other points, one more geometric refit.
-    let Scratch { residual, sorted } = &mut scratch;
+    let Scratch {
+        residual, sorted, ..
+    } = &mut scratch;
     let (mut model, mut band) = (winner.model, winner.band);
+    let mut keep = vec![false; xy.len()];
     residuals(xy, &model, residual);
     let mut count = select(residual, band, &mut keep);
     let mut next = vec![false; xy.len()];
@@ -294,6 +419,17 @@ pub(crate) fn fit(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn ransac_bound_matches_hand_computed_values() {
+        // w = 0.6, n = 5, p = 0.99: ln(0.01) / ln(1 - 0.6^5) = 56.9.
+        assert_eq!(required_subsets(0.6, 5, 0.99), 57);
+        // w = 0.5, n = 5, p = 0.999: ln(0.001) / ln(1 - 1/32) = 217.6.
+        assert_eq!(required_subsets(0.5, 5, 0.999), 218);
+        // A clean rim needs nothing beyond the floor, no inliers everything.
+        assert_eq!(required_subsets(1.0, 5, 0.999), 0);
+        assert_eq!(required_subsets(0.0, 5, 0.999), usize::MAX);
+    }
 
     #[test]
     fn parameter_vector_round_trip_and_circle_continuity() {

@@ -144,7 +144,7 @@ const NONE: usize = usize::MAX;
 
 /// Squared Euclidean distance; NaN (a vector with a NaN) counts as
 /// infinitely far, because every comparison with it is false.
-fn distance_sq(v: &[f64; 5], w: &[f64; 5]) -> f64 {
+pub(crate) fn distance_sq(v: &[f64; 5], w: &[f64; 5]) -> f64 {
     let d = [
         v[0] - w[0],
         v[1] - w[1],

@@ -143,6 +143,10 @@ fn evaluate(
     (cost, h, grad)
 }
 
+/// A Levenberg-Marquardt step shorter than this (normalised coordinates:
+/// the data has unit RMS radius) ends the refinement.
+const CONVERGED_STEP: f64 = 1.0e-7;
+
 /// Minimises the orthogonal distances of `points` to the ellipse, starting
 /// from `init`. Never returns a worse ellipse than `init`.
 pub(crate) fn refine(points: &[[f64; 2]], init: &Ellipse, iterations: usize) -> Ellipse {
@@ -168,6 +172,12 @@ pub(crate) fn refine(points: &[[f64; 2]], init: &Ellipse, iterations: usize) -> 
             continue;
         };
         let delta = chol.solve(&(-grad));
+        // Converged: the next step would move the outline by < 1e-7 of the
+        // data's size (normalised coordinates); not worth a pass over the
+        // points to take it.
+        if delta.norm() < CONVERGED_STEP {
+            break;
+        }
         let cand = Ellipse {
             cx: best.cx + delta[0],
             cy: best.cy + delta[1],
@@ -189,7 +199,7 @@ pub(crate) fn refine(points: &[[f64; 2]], init: &Ellipse, iterations: usize) -> 
             lambda = (lambda * 0.1).max(1.0e-12);
             // Converged: the step moves the outline by < 1e-7 of the data's
             // size (normalised coordinates), or the cost stopped falling.
-            if delta.norm() < 1.0e-7 || gain <= 1.0e-10 * cost {
+            if delta.norm() < CONVERGED_STEP || gain <= 1.0e-10 * cost {
                 break;
             }
         } else {

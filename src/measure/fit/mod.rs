@@ -75,8 +75,15 @@ pub struct FitConfig {
     pub ransac_threshold_px: f64,
     /// RANSAC: stop early once this fraction of the points agrees (N_T).
     pub ransac_consensus_fraction: f64,
-    /// Adaptive: number of random subsets.
+    /// Adaptive: most random subsets drawn (the RANSAC bound decides how
+    /// many, from `adaptive_min_subsets` up to this).
     pub adaptive_subsets: usize,
+    /// Adaptive: subsets drawn first; more only when the best model's
+    /// inlier share asks for them.
+    pub adaptive_min_subsets: usize,
+    /// Adaptive: wanted probability of at least one outlier-free subset,
+    /// given the best model's inlier share (the RANSAC bound), (0, 1).
+    pub adaptive_confidence: f64,
     /// Adaptive: points per subset (>= 5).
     pub adaptive_subset_size: usize,
     /// Adaptive: classes merge while their distance is below
@@ -143,6 +150,12 @@ impl FitConfig {
                 "fit.adaptive_cluster_relative and fit.adaptive_cluster_px cannot both be 0".into(),
             );
         }
+        if !(self.adaptive_confidence > 0.0 && self.adaptive_confidence < 1.0) {
+            return Err(format!(
+                "fit.adaptive_confidence must be in (0, 1) (got {})",
+                self.adaptive_confidence
+            ));
+        }
         if !(self.ransac_consensus_fraction > 0.0 && self.ransac_consensus_fraction <= 1.0) {
             return Err(format!(
                 "fit.ransac_consensus_fraction must be in (0, 1] (got {})",
@@ -161,6 +174,7 @@ impl FitConfig {
             ("algorithm1_subsets", self.algorithm1_subsets),
             ("ransac_iterations", self.ransac_iterations),
             ("adaptive_subsets", self.adaptive_subsets),
+            ("adaptive_min_subsets", self.adaptive_min_subsets),
             ("adaptive_clusters_scored", self.adaptive_clusters_scored),
             ("adaptive_refine_rounds", self.adaptive_refine_rounds),
         ] {
@@ -172,6 +186,7 @@ impl FitConfig {
         for (key, v) in [
             ("algorithm1_subsets", self.algorithm1_subsets),
             ("adaptive_subsets", self.adaptive_subsets),
+            ("adaptive_min_subsets", self.adaptive_min_subsets),
         ] {
             if v > 1000 {
                 return Err(format!("fit.{key} must be <= 1000 (got {v})"));
