@@ -197,6 +197,14 @@ fn local_optimise(
     result
 }
 
+/// What stages 2-3 computed in earlier rounds of subsets, by class centre:
+/// its support, and its local optimisation.
+#[derive(Default)]
+struct Memo {
+    scores: Vec<([f64; 5], usize)>,
+    optimised: Vec<Optimised>,
+}
+
 /// A completed local optimisation: its start, the models it passed through
 /// (each checked against the earlier candidates) and its result.
 struct Optimised {
@@ -266,14 +274,26 @@ fn best_candidate(
     initial_band: f64,
     min_band: f64,
     scratch: &mut Scratch,
-    memo: &mut Vec<Optimised>,
+    memo: &mut Memo,
 ) -> Option<Stage3> {
     let clusters = agglomerate(set, tolerance);
     let mut scored: Vec<(usize, usize, Ellipse)> = clusters
         .iter()
         .enumerate()
         .filter_map(|(i, c)| from_vector(&c.centre).map(|e| (i, e)))
-        .map(|(i, e)| (support(score_pts, &e, initial_band), i, e))
+        .map(|(i, e)| {
+            // A class centre scored in an earlier round has the same support.
+            let known = memo.scores.iter().find(|(c, _)| *c == clusters[i].centre);
+            let s = match known {
+                Some((_, s)) => *s,
+                None => {
+                    let s = support(score_pts, &e, initial_band);
+                    memo.scores.push((clusters[i].centre, s));
+                    s
+                }
+            };
+            (s, i, e)
+        })
         .collect();
     // Most support first; ties: the bigger class (lower index).
     scored.sort_by(|x, y| y.0.cmp(&x.0).then(x.1.cmp(&y.1)));
@@ -288,7 +308,7 @@ fn best_candidate(
             min_band,
             scratch,
             &finished,
-            memo,
+            &mut memo.optimised,
         ) {
             candidates.push(c);
         }
@@ -368,7 +388,7 @@ pub(crate) fn fit(
     let mut drawn = 0;
     let mut target = cfg.adaptive_min_subsets.min(max_subsets);
     let mut set: Vec<[f64; 5]> = Vec::with_capacity(max_subsets);
-    let mut memo: Vec<Optimised> = Vec::new();
+    let mut memo = Memo::default();
     let winner = loop {
         draw_subsets(
             pts,
