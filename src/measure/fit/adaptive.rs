@@ -100,6 +100,7 @@ fn support(pts: &[[f64; 2]], e: &Ellipse, band: f64) -> usize {
 }
 
 /// The state of one candidate model during its local optimisation.
+#[derive(Clone, Copy)]
 struct Candidate {
     model: Ellipse,
     band: f64,
@@ -110,6 +111,7 @@ struct Candidate {
 /// within the band and refit them with Taubin's fit; the band shrinks to
 /// k robust sigmas, at most halving per round (so that a rough start is not
 /// locked onto a subset of the rim) and at least 30 %, never below the floor.
+#[allow(clippy::too_many_arguments)]
 fn local_optimise(
     xy: &[[f64; 2]],
     start: &Ellipse,
@@ -118,11 +120,27 @@ fn local_optimise(
     min_band: f64,
     scratch: &mut Scratch,
     finished: &[[f64; 5]],
+    memo: &mut Vec<Optimised>,
 ) -> Option<Candidate> {
     // A candidate that comes within this of an earlier candidate's final
     // model would select the same points and end on the same model: it is
     // dropped (on a clean rim most candidates end on one model).
     let duplicate_sq = (DUPLICATE_BAND_SHARE * min_band).powi(2);
+    let is_duplicate = |v: &[f64; 5]| {
+        finished
+            .iter()
+            .any(|f| super::cluster::distance_sq(f, v) < duplicate_sq)
+    };
+    // The same start (a class centre that did not change between rounds of
+    // subsets) takes the same path: replay its recorded models against this
+    // round's finished candidates instead of optimising it again.
+    if let Some(m) = memo.iter().find(|m| m.start == *start && m.band == band) {
+        if m.path.iter().any(is_duplicate) {
+            return None;
+        }
+        return m.result;
+    }
+    let mut path = Vec::new();
     let mut c = Candidate {
         model: *start,
         band,
@@ -150,12 +168,10 @@ fn local_optimise(
             if let Some(e) = taubin::fit_ellipse(xy, Some(keep)).filter(plausible) {
                 c.model = e;
                 let v = to_vector(&e);
-                if finished
-                    .iter()
-                    .any(|f| super::cluster::distance_sq(f, &v) < duplicate_sq)
-                {
+                if is_duplicate(&v) {
                     return None;
                 }
+                path.push(v);
                 residuals(xy, &c.model, residual);
             }
             c.sigma = robust_sigma(residual, keep, sorted);
@@ -171,7 +187,31 @@ fn local_optimise(
             break;
         }
     }
-    c.sigma.is_finite().then_some(c)
+    let result = c.sigma.is_finite().then_some(c);
+    memo.push(Optimised {
+        start: *start,
+        band,
+        path,
+        result,
+    });
+    result
+}
+
+/// What stages 2-3 computed in earlier rounds of subsets, by class centre:
+/// its support, and its local optimisation.
+#[derive(Default)]
+struct Memo {
+    scores: Vec<([f64; 5], usize)>,
+    optimised: Vec<Optimised>,
+}
+
+/// A completed local optimisation: its start, the models it passed through
+/// (each checked against the earlier candidates) and its result.
+struct Optimised {
+    start: Ellipse,
+    band: f64,
+    path: Vec<[f64; 5]>,
+    result: Option<Candidate>,
 }
 
 /// Reused buffers: residuals of every point, the selected ones for the
@@ -234,21 +274,42 @@ fn best_candidate(
     initial_band: f64,
     min_band: f64,
     scratch: &mut Scratch,
+    memo: &mut Memo,
 ) -> Option<Stage3> {
     let clusters = agglomerate(set, tolerance);
     let mut scored: Vec<(usize, usize, Ellipse)> = clusters
         .iter()
         .enumerate()
         .filter_map(|(i, c)| from_vector(&c.centre).map(|e| (i, e)))
-        .map(|(i, e)| (support(score_pts, &e, initial_band), i, e))
+        .map(|(i, e)| {
+            // A class centre scored in an earlier round has the same support.
+            let known = memo.scores.iter().find(|(c, _)| *c == clusters[i].centre);
+            let s = match known {
+                Some((_, s)) => *s,
+                None => {
+                    let s = support(score_pts, &e, initial_band);
+                    memo.scores.push((clusters[i].centre, s));
+                    s
+                }
+            };
+            (s, i, e)
+        })
         .collect();
     // Most support first; ties: the bigger class (lower index).
     scored.sort_by(|x, y| y.0.cmp(&x.0).then(x.1.cmp(&y.1)));
     let mut candidates: Vec<Candidate> = Vec::with_capacity(cfg.adaptive_clusters_scored);
     for (_, _, e) in scored.iter().take(cfg.adaptive_clusters_scored) {
         let finished: Vec<[f64; 5]> = candidates.iter().map(|c| to_vector(&c.model)).collect();
-        if let Some(c) = local_optimise(lo_pts, e, initial_band, cfg, min_band, scratch, &finished)
-        {
+        if let Some(c) = local_optimise(
+            lo_pts,
+            e,
+            initial_band,
+            cfg,
+            min_band,
+            scratch,
+            &finished,
+            &mut memo.optimised,
+        ) {
             candidates.push(c);
         }
     }
@@ -327,6 +388,7 @@ pub(crate) fn fit(
     let mut drawn = 0;
     let mut target = cfg.adaptive_min_subsets.min(max_subsets);
     let mut set: Vec<[f64; 5]> = Vec::with_capacity(max_subsets);
+    let mut memo = Memo::default();
     let winner = loop {
         draw_subsets(
             pts,
@@ -345,6 +407,7 @@ pub(crate) fn fit(
             initial_band,
             min_band,
             &mut scratch,
+            &mut memo,
         );
         if drawn >= max_subsets {
             break found;
