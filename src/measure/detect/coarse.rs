@@ -157,6 +157,60 @@ pub struct BlobFinder {
     blob_runs: Vec<(usize, usize, usize, usize)>,
     /// Size of each region of the highest threshold.
     region_areas: Vec<usize>,
+    /// The ring test's offsets for each chamfer distance (below
+    /// [`RING_CACHE`]), computed when first needed.
+    ring_cache: Vec<Option<[RingStep; RING_SAMPLES]>>,
+}
+
+/// One sample of the ring test at a given chamfer distance: the floors of
+/// rho cos and rho sin, and whether either lies so close below an integer
+/// that adding the pixel coordinate in f64 might round up to it (then the
+/// sample is computed in f64, exactly as without the table).
+#[derive(Clone, Copy, Debug, Default)]
+struct RingStep {
+    du: i64,
+    dv: i64,
+    near: bool,
+}
+
+/// Chamfer distances with a cached ring table (larger ones, of huge
+/// regions, are computed each time).
+const RING_CACHE: usize = 2048;
+
+/// The ring test's offsets at chamfer distance `di`.
+fn ring_steps<'a>(
+    cache: &'a mut Vec<Option<[RingStep; RING_SAMPLES]>>,
+    scratch: &'a mut [RingStep; RING_SAMPLES],
+    di: u32,
+) -> &'a [RingStep; RING_SAMPLES] {
+    let compute = |steps: &mut [RingStep; RING_SAMPLES]| {
+        let rho = f64::from(di) / 3.0 * 1.25 + 1.0;
+        for (step, &(sn, cs)) in steps.iter_mut().zip(RING.iter()) {
+            let (tu, tv) = (rho * cs, rho * sn);
+            let (fu, fv) = (tu.floor(), tv.floor());
+            // x + t rounds to at most half an ulp of x + t (far below
+            // 1e-6 for any image size) and never below x + floor(t).
+            let near = |t: f64, f: f64| f + 1.0 - t < 1e-6;
+            *step = RingStep {
+                du: fu as i64,
+                dv: fv as i64,
+                near: near(tu, fu) || near(tv, fv),
+            };
+        }
+    };
+    let index = di as usize;
+    if index >= RING_CACHE {
+        compute(scratch);
+        return scratch;
+    }
+    if cache.len() <= index {
+        cache.resize(index + 1, None);
+    }
+    cache[index].get_or_insert_with(|| {
+        let mut steps = [RingStep::default(); RING_SAMPLES];
+        compute(&mut steps);
+        steps
+    })
 }
 
 /// A run of dark pixels `x0..x1` of row `y`, a node of the union-find.
@@ -511,6 +565,7 @@ impl BlobFinder {
         // outside their inscribed circle. Not on the image's outermost
         // rows and columns.
         let mut ringed = (0.0f64, 0u32, 0usize);
+        let mut ring_scratch = [RingStep::default(); RING_SAMPLES];
         for &(start, len, y, x0) in runs.iter() {
             if y == 0 || y + 1 >= h {
                 continue;
@@ -545,9 +600,19 @@ impl BlobFinder {
                 }
                 let rho = f64::from(di) / 3.0 * 1.25 + 1.0;
                 let (mut seen, mut light) = (0usize, 0usize);
-                for &(sn, cs) in RING.iter() {
-                    let (u, v) = (x as f64 + rho * cs, y as f64 + rho * sn);
-                    if u < 0.0 || v < 0.0 || u >= w as f64 || v >= h as f64 {
+                let steps = ring_steps(&mut self.ring_cache, &mut ring_scratch, di);
+                for (step, &(sn, cs)) in steps.iter().zip(RING.iter()) {
+                    // The sample pixel (floor of x + rho cos, y + rho sin):
+                    // the precomputed integer offsets, but for offsets just
+                    // below an integer, where the sum's rounding may reach
+                    // it: there the float sum, as is.
+                    let (u, v) = if step.near {
+                        let (u, v) = (x as f64 + rho * cs, y as f64 + rho * sn);
+                        (u.floor() as i64, v.floor() as i64)
+                    } else {
+                        (x as i64 + step.du, y as i64 + step.dv)
+                    };
+                    if u < 0 || v < 0 || u >= w as i64 || v >= h as i64 {
                         continue;
                     }
                     seen += 1;
