@@ -513,6 +513,12 @@ impl BlobFinder {
                     break;
                 }
                 let x0 = x;
+                // Dark pixels, 16 at a time while a whole block is dark.
+                while x + 16 <= w
+                    && i32::from(row[x..x + 16].iter().fold(0, |m: u8, &p| m.max(p))) <= level
+                {
+                    x += 16;
+                }
                 while x < w && i32::from(row[x]) <= level {
                     x += 1;
                 }
