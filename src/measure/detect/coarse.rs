@@ -44,6 +44,10 @@ impl Decimated {
         self.column_sums.clear();
         self.column_sums.resize(used, 0);
         let area = (factor * factor) as u32;
+        if factor == 4 {
+            self.update_by_4(raw, w);
+            return;
+        }
         for by in 0..self.height {
             let top = by * factor;
             let first = &raw[top * w..top * w + used];
@@ -68,6 +72,52 @@ impl Decimated {
                     let s: u32 = block.iter().map(|&v| u32::from(v)).sum();
                     *o = ((s + area / 2) / area) as u8;
                 }
+            }
+        }
+    }
+
+    /// The default factor 4, eight columns (two blocks) at a time in a u64:
+    /// the sums of pixel pairs of the four rows in u16 lanes (at most
+    /// 8 x 255), then of lane pairs in u32 lanes (a block's sum), with a
+    /// rounded division by 16. The same means as the general loop.
+    fn update_by_4(&mut self, raw: &[u8], w: usize) {
+        const BYTES: u64 = 0x00ff_00ff_00ff_00ff;
+        const HALVES: u64 = 0x0000_ffff_0000_ffff;
+        let used = self.width * 4;
+        let pairs = |chunk: &[u8]| {
+            let mut bytes = [0u8; 8];
+            bytes.copy_from_slice(chunk);
+            let v = u64::from_le_bytes(bytes);
+            (v & BYTES) + ((v >> 8) & BYTES)
+        };
+        for (by, out) in self.pixels.chunks_exact_mut(self.width).enumerate() {
+            let row = |k: usize| {
+                let y = by * 4 + k;
+                raw.get(y * w..y * w + used).unwrap_or(&[])
+            };
+            let (r0, r1, r2, r3) = (row(0), row(1), row(2), row(3));
+            let chunks = r0
+                .chunks_exact(8)
+                .zip(r1.chunks_exact(8))
+                .zip(r2.chunks_exact(8).zip(r3.chunks_exact(8)));
+            let mut outs = out.chunks_exact_mut(2);
+            for (o, ((a, b), (c, d))) in (&mut outs).zip(chunks) {
+                let lanes = pairs(a) + pairs(b) + pairs(c) + pairs(d);
+                let sums = (lanes & HALVES) + ((lanes >> 16) & HALVES);
+                let means = (sums + 0x0000_0008_0000_0008) >> 4;
+                o[0] = means as u8;
+                o[1] = (means >> 32) as u8;
+            }
+            // An odd last block.
+            if let Some(last) = outs.into_remainder().first_mut() {
+                let x = used - 4;
+                let mut t = 0u32;
+                for r in [r0, r1, r2, r3] {
+                    if let Some(block) = r.get(x..x + 4) {
+                        t += block.iter().map(|&p| u32::from(p)).sum::<u32>();
+                    }
+                }
+                *last = ((t + 8) >> 4) as u8;
             }
         }
     }
@@ -157,6 +207,60 @@ pub struct BlobFinder {
     blob_runs: Vec<(usize, usize, usize, usize)>,
     /// Size of each region of the highest threshold.
     region_areas: Vec<usize>,
+    /// The ring test's offsets for each chamfer distance (below
+    /// [`RING_CACHE`]), computed when first needed.
+    ring_cache: Vec<Option<[RingStep; RING_SAMPLES]>>,
+}
+
+/// One sample of the ring test at a given chamfer distance: the floors of
+/// rho cos and rho sin, and whether either lies so close below an integer
+/// that adding the pixel coordinate in f64 might round up to it (then the
+/// sample is computed in f64, exactly as without the table).
+#[derive(Clone, Copy, Debug, Default)]
+struct RingStep {
+    du: i64,
+    dv: i64,
+    near: bool,
+}
+
+/// Chamfer distances with a cached ring table (larger ones, of huge
+/// regions, are computed each time).
+const RING_CACHE: usize = 2048;
+
+/// The ring test's offsets at chamfer distance `di`.
+fn ring_steps<'a>(
+    cache: &'a mut Vec<Option<[RingStep; RING_SAMPLES]>>,
+    scratch: &'a mut [RingStep; RING_SAMPLES],
+    di: u32,
+) -> &'a [RingStep; RING_SAMPLES] {
+    let compute = |steps: &mut [RingStep; RING_SAMPLES]| {
+        let rho = f64::from(di) / 3.0 * 1.25 + 1.0;
+        for (step, &(sn, cs)) in steps.iter_mut().zip(RING.iter()) {
+            let (tu, tv) = (rho * cs, rho * sn);
+            let (fu, fv) = (tu.floor(), tv.floor());
+            // x + t rounds to at most half an ulp of x + t (far below
+            // 1e-6 for any image size) and never below x + floor(t).
+            let near = |t: f64, f: f64| f + 1.0 - t < 1e-6;
+            *step = RingStep {
+                du: fu as i64,
+                dv: fv as i64,
+                near: near(tu, fu) || near(tv, fv),
+            };
+        }
+    };
+    let index = di as usize;
+    if index >= RING_CACHE {
+        compute(scratch);
+        return scratch;
+    }
+    if cache.len() <= index {
+        cache.resize(index + 1, None);
+    }
+    cache[index].get_or_insert_with(|| {
+        let mut steps = [RingStep::default(); RING_SAMPLES];
+        compute(&mut steps);
+        steps
+    })
 }
 
 /// A run of dark pixels `x0..x1` of row `y`, a node of the union-find.
@@ -396,7 +500,10 @@ impl BlobFinder {
             let mut x = 0;
             while x < w {
                 // Skip light pixels, 16 at a time while a whole block is light.
-                while x + 16 <= w && row[x..x + 16].iter().all(|&p| i32::from(p) > level) {
+                // (The block's minimum: no early exit, so it vectorises.)
+                while x + 16 <= w
+                    && i32::from(row[x..x + 16].iter().fold(u8::MAX, |m, &p| m.min(p))) > level
+                {
                     x += 16;
                 }
                 while x < w && i32::from(row[x]) > level {
@@ -406,6 +513,12 @@ impl BlobFinder {
                     break;
                 }
                 let x0 = x;
+                // Dark pixels, 16 at a time while a whole block is dark.
+                while x + 16 <= w
+                    && i32::from(row[x..x + 16].iter().fold(0, |m: u8, &p| m.max(p))) <= level
+                {
+                    x += 16;
+                }
                 while x < w && i32::from(row[x]) <= level {
                     x += 1;
                 }
@@ -511,6 +624,7 @@ impl BlobFinder {
         // outside their inscribed circle. Not on the image's outermost
         // rows and columns.
         let mut ringed = (0.0f64, 0u32, 0usize);
+        let mut ring_scratch = [RingStep::default(); RING_SAMPLES];
         for &(start, len, y, x0) in runs.iter() {
             if y == 0 || y + 1 >= h {
                 continue;
@@ -545,9 +659,19 @@ impl BlobFinder {
                 }
                 let rho = f64::from(di) / 3.0 * 1.25 + 1.0;
                 let (mut seen, mut light) = (0usize, 0usize);
-                for &(sn, cs) in RING.iter() {
-                    let (u, v) = (x as f64 + rho * cs, y as f64 + rho * sn);
-                    if u < 0.0 || v < 0.0 || u >= w as f64 || v >= h as f64 {
+                let steps = ring_steps(&mut self.ring_cache, &mut ring_scratch, di);
+                for (step, &(sn, cs)) in steps.iter().zip(RING.iter()) {
+                    // The sample pixel (floor of x + rho cos, y + rho sin):
+                    // the precomputed integer offsets, but for offsets just
+                    // below an integer, where the sum's rounding may reach
+                    // it: there the float sum, as is.
+                    let (u, v) = if step.near {
+                        let (u, v) = (x as f64 + rho * cs, y as f64 + rho * sn);
+                        (u.floor() as i64, v.floor() as i64)
+                    } else {
+                        (x as i64 + step.du, y as i64 + step.dv)
+                    };
+                    if u < 0 || v < 0 || u >= w as i64 || v >= h as i64 {
                         continue;
                     }
                     seen += 1;
@@ -769,11 +893,24 @@ mod tests {
 
     #[test]
     fn decimation_is_the_rounded_block_mean() {
-        let img = GrayImage::from_fn(67, 45, |x, y| Luma([((x * 37 + y * 91) % 256) as u8]));
-        for factor in [1usize, 3, 4, 16] {
+        // Widths of an even and an odd number of 4-blocks, and of fewer
+        // than two.
+        for (w, h, factor) in [
+            (67, 45, 1usize),
+            (67, 45, 3),
+            (67, 45, 4),
+            (71, 45, 4),
+            (7, 9, 4),
+            (3, 9, 4),
+            (67, 45, 16),
+        ] {
+            let img = GrayImage::from_fn(w, h, |x, y| Luma([((x * 37 + y * 91) % 256) as u8]));
             let mut dec = Decimated::default();
             dec.update(&img, factor);
-            assert_eq!((dec.width, dec.height), (67 / factor, 45 / factor));
+            assert_eq!(
+                (dec.width, dec.height),
+                (w as usize / factor, h as usize / factor)
+            );
             for by in 0..dec.height {
                 for bx in 0..dec.width {
                     let mut sum = 0u32;
