@@ -13,6 +13,7 @@
 //! so the edge we look for gets brighter going outward. Its inner side (band
 //! against the lighter canopy) has the opposite polarity and is not counted.
 
+use super::detect::rim;
 use super::pose::CirclePose;
 use crate::camera::CameraModel;
 use image::GrayImage;
@@ -44,29 +45,6 @@ const MIN_SHARE_IN_IMAGE: f64 = 0.5;
 /// the two predictions are within the search band of each other anyway.
 const MIN_RIM_SIZE_PX: f64 = 4.0;
 
-/// Sub-pixel resolution of the profile's sample positions: 1/256 pixel.
-const FIXED_ONE: i32 = 256;
-/// Largest image side whose positions, times `FIXED_ONE` and times the 16
-/// steps of a profile, fit an i32.
-const MAX_FIXED_SIDE: u32 = 1 << 18;
-
-/// Bilinear grey value (times `FIXED_ONE`^2) at the fixed-point position
-/// (`u`, `v`) in 1/`FIXED_ONE` pixels (pixel centres at multiples of it),
-/// which must be inside the image: `0 <= u <= (width - 1) * FIXED_ONE`, and
-/// likewise `v`. Integer arithmetic: a profile is 17 of these, for 72 points
-/// of two predicted rims on every frame.
-fn grey_fixed(raw: &[u8], w: usize, h: usize, u: i32, v: i32) -> i32 {
-    let (x0, y0) = ((u >> 8) as usize, (v >> 8) as usize);
-    let (fu, fv) = (u & (FIXED_ONE - 1), v & (FIXED_ONE - 1));
-    let i = y0 * w + x0;
-    let dx = usize::from(x0 + 1 < w);
-    let dy = if y0 + 1 < h { w } else { 0 };
-    let g = |k: usize| i32::from(raw[k]);
-    let top = g(i) * FIXED_ONE + (g(i + dx) - g(i)) * fu;
-    let bottom = g(i + dy) * FIXED_ONE + (g(i + dy + dx) - g(i + dy)) * fu;
-    top * FIXED_ONE + (bottom - top) * fv
-}
-
 /// Offsets searched across the curve: -SEARCH_PX..=SEARCH_PX.
 const SEARCH_STEPS: usize = (2.0 * SEARCH_PX / SEARCH_STEP_PX) as usize + 1;
 /// Grey values sampled across the curve: the search band plus the 1 px on
@@ -78,73 +56,35 @@ const STEPS_PER_PX: usize = (1.0 / SEARCH_STEP_PX) as usize;
 /// its offset from `p` along the unit image direction `out` (pixels,
 /// sub-pixel by a parabola through the peak) if it is within `SEARCH_PX` and
 /// at least `MIN_EDGE_GREY_PER_PX` strong; `Some(None)` for no edge; `None`
-/// if the search leaves the image.
-fn outward_edge_offset(image: &GrayImage, p: [f64; 2], out: [f64; 2]) -> Option<Option<f64>> {
+/// if the search leaves the image. `grey` is scratch for the profile.
+fn outward_edge_offset(
+    image: &GrayImage,
+    p: [f64; 2],
+    out: [f64; 2],
+    grey: &mut Vec<f32>,
+) -> Option<Option<f64>> {
+    // The detector's ray sampler: bilinear, stopping at the image border.
     let start = -SEARCH_PX - 1.0;
-    let at = |j: usize| {
-        let o = start + j as f64 * SEARCH_STEP_PX;
-        (p[0] + out[0] * o, p[1] + out[1] * o)
-    };
-    // The samples lie on a segment and each coordinate is monotone along it
-    // (also in floating point), so all are inside the image if both ends are.
-    let (w, h) = image.dimensions();
-    let inside = |(u, v): (f64, f64)| {
-        u >= 0.0 && v >= 0.0 && u <= f64::from(w) - 1.0 && v <= f64::from(h) - 1.0
-    };
-    // Larger images would overflow the i32 fixed-point positions below.
-    if w > MAX_FIXED_SIDE || h > MAX_FIXED_SIDE {
+    let end = start + (PROFILE_LEN - 1) as f64 * SEARCH_STEP_PX;
+    rim::profile(image, p, out, start, end, SEARCH_STEP_PX, grey);
+    if grey.len() < PROFILE_LEN {
         return None;
     }
-    if !(inside(at(0)) && inside(at(PROFILE_LEN - 1))) {
-        return None;
-    }
-    let (raw, w, h) = (image.as_raw().as_slice(), w as usize, h as usize);
-    // Fixed-point positions: both ends are inside the image, and rounding
-    // each coordinate to 1/256 px keeps it between the ends' rounded values.
-    let fixed = |x: f64| (x * f64::from(FIXED_ONE)).round() as i32;
-    let (u0, v0) = at(0);
-    let (u1, v1) = at(PROFILE_LEN - 1);
-    let (u0, v0, u1, v1) = (fixed(u0), fixed(v0), fixed(u1), fixed(v1));
-    // PROFILE_LEN - 1 = 2^SHIFT steps: sample j sits at the convex
-    // combination (u0 * (16 - j) + u1 * j) / 16, a non-negative value floored
-    // by the shift, so it lies between the ends.
-    const SHIFT: u32 = (PROFILE_LEN - 1).trailing_zeros();
-    const _: () = assert!(1 << SHIFT == PROFILE_LEN - 1);
-    // Grey levels in units of 1/FIXED_ONE^2, exact integers.
-    let mut grey = [0i32; PROFILE_LEN];
-    for (j, g) in grey.iter_mut().enumerate() {
-        let j = j as i32;
-        let (u, v) = (
-            ((u0 << SHIFT) + (u1 - u0) * j) >> SHIFT,
-            ((v0 << SHIFT) + (v1 - v0) * j) >> SHIFT,
-        );
-        *g = grey_fixed(raw, w, h, u, v);
-    }
-    // Central difference over 2 px at each searched offset, in units of
-    // 1 / (2 FIXED_ONE^2) grey levels per pixel (exact).
-    let mut gradient = [0i32; SEARCH_STEPS];
+    // Central difference over 2 px at each searched offset.
+    let mut gradient = [0.0; SEARCH_STEPS];
     for (i, g) in gradient.iter_mut().enumerate() {
-        *g = grey[i + 2 * STEPS_PER_PX] - grey[i];
+        *g = f64::from(grey[i + 2 * STEPS_PER_PX] - grey[i]) / 2.0;
     }
-    let per_grey_per_px = 2.0 * f64::from(FIXED_ONE * FIXED_ONE);
-    // The strongest; the last of equals, as Iterator::max_by.
-    let mut i_best = 0;
-    for (i, g) in gradient.iter().enumerate() {
-        if *g >= gradient[i_best] {
-            i_best = i;
-        }
-    }
-    let best = f64::from(gradient[i_best]);
-    if best < MIN_EDGE_GREY_PER_PX * per_grey_per_px {
+    let (i_best, &best) = gradient
+        .iter()
+        .enumerate()
+        .max_by(|a, b| a.1.total_cmp(b.1))?;
+    if best < MIN_EDGE_GREY_PER_PX {
         return Some(None);
     }
     let mut offset = i_best as f64 * SEARCH_STEP_PX - SEARCH_PX;
     if i_best > 0 && i_best + 1 < SEARCH_STEPS {
-        let (l, c, r) = (
-            f64::from(gradient[i_best - 1]),
-            best,
-            f64::from(gradient[i_best + 1]),
-        );
+        let (l, c, r) = (gradient[i_best - 1], best, gradient[i_best + 1]);
         let curvature = l - 2.0 * c + r;
         if curvature < 0.0 {
             offset += 0.5 * (l - r) / curvature * SEARCH_STEP_PX;
@@ -193,6 +133,7 @@ pub fn canopy_support(
     let e2 = n.cross(&e1);
 
     let (mut judged, mut with_edge) = (0usize, 0usize);
+    let mut grey = Vec::with_capacity(PROFILE_LEN);
     let (mut min_u, mut max_u, mut min_v, mut max_v) = (
         f64::INFINITY,
         f64::NEG_INFINITY,
@@ -217,7 +158,7 @@ pub fn canopy_support(
         max_u = max_u.max(p[0]);
         min_v = min_v.min(p[1]);
         max_v = max_v.max(p[1]);
-        if let Some(edge) = outward_edge_offset(image, p, [d[0] / len, d[1] / len]) {
+        if let Some(edge) = outward_edge_offset(image, p, [d[0] / len, d[1] / len], &mut grey) {
             judged += 1;
             if edge.is_some_and(|o| o.abs() <= TOLERANCE_PX) {
                 with_edge += 1;

@@ -22,8 +22,9 @@
 //!    orthogonal-distance (geometric) refinement, the band at k robust
 //!    sigmas (never below a pixel floor), until the inlier set is stable.
 
+use super::algorithm1::draw_subset_ellipses;
 use super::cluster::agglomerate;
-use super::{FitConfig, FitError, Points, geometric, least_squares, taubin};
+use super::{FitConfig, FitError, Points, geometric, taubin};
 use crate::measure::ellipse::Ellipse;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -336,28 +337,6 @@ fn best_candidate(
 /// inlier band of an earlier candidate's final model.
 const DUPLICATE_BAND_SHARE: f64 = 0.02;
 
-/// Draws `count` more random subsets and appends the parameter vectors of
-/// their plausible ellipses to `set`.
-fn draw_subsets(
-    pts: &Points,
-    rng: &mut ChaCha8Rng,
-    count: usize,
-    size: usize,
-    set: &mut Vec<[f64; 5]>,
-) {
-    let size = size.min(pts.xy.len());
-    for _ in 0..count {
-        let idx = rand::seq::index::sample(rng, pts.xy.len(), size);
-        let conic = least_squares::fit_conic(idx.iter().map(|i| &pts.xy[i]));
-        if let Some(e) = conic
-            .and_then(|c| least_squares::conic_to_ellipse(&c))
-            .filter(plausible)
-        {
-            set.push(to_vector(&e));
-        }
-    }
-}
-
 pub(crate) fn fit(
     pts: &Points,
     cfg: &FitConfig,
@@ -390,12 +369,10 @@ pub(crate) fn fit(
     let mut set: Vec<[f64; 5]> = Vec::with_capacity(max_subsets);
     let mut memo = Memo::default();
     let winner = loop {
-        draw_subsets(
-            pts,
-            &mut rng,
-            target - drawn,
-            cfg.adaptive_subset_size,
-            &mut set,
+        set.extend(
+            draw_subset_ellipses(pts, &mut rng, target - drawn, cfg.adaptive_subset_size)
+                .filter(plausible)
+                .map(|e| to_vector(&e)),
         );
         drawn = target;
         let found = best_candidate(

@@ -26,16 +26,23 @@ pub(crate) fn subset_ellipses(
     seed: u64,
 ) -> Vec<Ellipse> {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    draw_subset_ellipses(pts, &mut rng, subsets, size).collect()
+}
+
+/// The ellipses of `count` more random subsets of `size` points drawn with
+/// `rng` (so that a caller can draw in rounds); non-ellipses give none.
+pub(crate) fn draw_subset_ellipses<'a>(
+    pts: &'a Points,
+    rng: &'a mut ChaCha8Rng,
+    count: usize,
+    size: usize,
+) -> impl Iterator<Item = Ellipse> + 'a {
     let size = size.min(pts.xy.len());
-    let mut out = Vec::with_capacity(subsets);
-    for _ in 0..subsets {
-        let idx = rand::seq::index::sample(&mut rng, pts.xy.len(), size);
-        let conic = least_squares::fit_conic(idx.iter().map(|i| &pts.xy[i]));
-        if let Some(e) = conic.and_then(|c| least_squares::conic_to_ellipse(&c)) {
-            out.push(e);
-        }
-    }
-    out
+    (0..count).filter_map(move |_| {
+        let idx = rand::seq::index::sample(rng, pts.xy.len(), size);
+        least_squares::fit_conic(idx.iter().map(|i| &pts.xy[i]))
+            .and_then(|c| least_squares::conic_to_ellipse(&c))
+    })
 }
 
 /// Algorithm 1; returns the ellipse (normalised coordinates) and P*.
