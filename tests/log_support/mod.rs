@@ -35,8 +35,15 @@ pub fn camera() -> CameraModel {
     .unwrap()
 }
 
+/// The embedded log settings with a queue that holds everything one test
+/// writes (a few thousand items), so a loaded machine, where the writer
+/// thread may not run until the test has queued it all, cannot drop items
+/// that the test then counts. Dropping on a full queue is tested on its own
+/// with `queue_len = 1`.
 pub fn config() -> LogConfig {
-    drogue_vision::config::Config::embedded().log
+    let mut cfg = drogue_vision::config::Config::embedded().log;
+    cfg.queue_len = 4096;
+    cfg
 }
 
 /// Noise-like pixels that differ for every frame (an xorshift of seq, x, y).
