@@ -122,6 +122,13 @@ impl Decimated {
         }
     }
 
+    /// Whether a box [x0, y0, x1, y1] (inclusive, decimated pixels) touches
+    /// the image's outermost rows or columns.
+    pub fn touches_border(&self, bbox: [usize; 4]) -> bool {
+        let [x0, y0, x1, y1] = bbox;
+        x0 == 0 || y0 == 0 || x1 + 1 >= self.width || y1 + 1 >= self.height
+    }
+
     /// Full-resolution pixel coordinates of a decimated pixel position.
     pub fn to_full(&self, x: f64, y: f64) -> [f64; 2] {
         let f = self.factor as f64;
@@ -172,6 +179,16 @@ pub struct Blob {
     pub region_area: usize,
     /// Index of the threshold (in the configured list) the blob was found at.
     pub level: usize,
+}
+
+impl Blob {
+    /// Whether the region's moments can describe a whole disc: not cut by
+    /// the frame's border (the receiver's own probe always is) and no more
+    /// elongated than the most tilted disc. A disc merged with the hose or
+    /// probe is neither, and is still tried, after these.
+    pub fn whole_and_round(&self, img: &Decimated, min_axis_ratio: f64) -> bool {
+        !img.touches_border(self.bbox) && self.b_px >= min_axis_ratio * self.a_px
+    }
 }
 
 /// The level below which `fraction` of the pixels lie.

@@ -246,7 +246,9 @@ impl Detector {
                 .then(x.region.cmp(&y.region))
                 .then(y.area.cmp(&x.area))
         });
-        let mut kept: Vec<Blob> = Vec::new();
+        // The budget: the regions, and within each its largest part at
+        // each threshold.
+        let mut selected: Vec<usize> = Vec::new();
         let mut regions = 0usize;
         for i in 0..blobs.len() {
             let b = &blobs[i];
@@ -257,17 +259,37 @@ impl Detector {
                 }
                 regions += 1;
             }
-            let same_region = |k: &Blob| k.region == b.region;
-            if kept
+            let same_region = |k: &usize| blobs[*k].region == b.region;
+            if selected
                 .iter()
                 .rev()
                 .take_while(|k| same_region(k))
-                .any(|k| k.level == b.level)
+                .any(|&k| blobs[k].level == b.level)
             {
                 continue;
             }
-            self.finder.describe_core(&self.decimated, &mut blobs[i]);
-            let b = &blobs[i];
+            selected.push(i);
+        }
+        // Verified in order of how disc-like their moments are (whole and
+        // round first, the rest as they were), so that a clear view of the
+        // drogue ends the search before the probe and hose are looked at.
+        // The stable sort keeps the size order within each group.
+        let round: Vec<bool> = selected
+            .iter()
+            .map(|&i| blobs[i].whole_and_round(&self.decimated, self.cfg.min_axis_ratio))
+            .collect();
+        let mut order: Vec<usize> = (0..selected.len()).collect();
+        order.sort_by_key(|&k| !round[k]);
+        let mut kept: Vec<Blob> = Vec::new();
+        let mut best: Option<Verified> = None;
+        let mut tried: Vec<Seed> = Vec::new();
+        'blobs: for &k in &order {
+            let index = selected[k];
+            // The deepest and best-ringed points cost a distance transform
+            // of the region: only for the blobs that get this far.
+            self.finder
+                .describe_core(&self.decimated, &mut blobs[index]);
+            let b = &blobs[index];
             // Drop near-duplicates (the same region at several thresholds).
             let dup = kept.iter().any(|k| {
                 let near = |p: [f64; 2], q: [f64; 2], r: f64| (p[0] - q[0]).hypot(p[1] - q[1]) < r;
@@ -277,13 +299,10 @@ impl Detector {
                     && near(k.ringed_px, b.ringed_px, r)
                     && (k.a_px / b.a_px - 1.0).abs() < 0.25
             });
-            if !dup {
-                kept.push(b.clone());
+            if dup {
+                continue;
             }
-        }
-        let mut best: Option<Verified> = None;
-        let mut tried: Vec<Seed> = Vec::new();
-        for (i, b) in kept.iter().enumerate() {
+            kept.push(b.clone());
             // Two seeds: the centroid with the moment ellipse, and the
             // deepest point with its inscribed circle (on the disc even when
             // a hose or probe has merged with it).
@@ -325,18 +344,20 @@ impl Detector {
                     continue;
                 }
                 tried.push(seed.clone());
-                let r = self.verify_seed(image, seed, 3 * i as u64 + j as u64);
+                // The RANSAC seed of a blob is its place in the size order,
+                // whatever order it is verified in.
+                let r = self.verify_seed(image, seed, 3 * k as u64 + j as u64);
                 if let Some(v) = r
                     && best.as_ref().is_none_or(|bv| v.score > bv.score)
                 {
                     best = Some(v);
                 }
-            }
-            if best
-                .as_ref()
-                .is_some_and(|v| v.score >= self.cfg.accept_score)
-            {
-                break;
+                if best
+                    .as_ref()
+                    .is_some_and(|v| v.score >= self.cfg.accept_score)
+                {
+                    break 'blobs;
+                }
             }
         }
         self.blobs = blobs;
