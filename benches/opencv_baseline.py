@@ -61,6 +61,8 @@ def main():
             if e and t:
                 centre.append(math.hypot(e[0] - t["cx"], e[1] - t["cy"]))
                 axes.append(max(abs(e[2] - t["a"]), abs(e[3] - t["b"])))
+        for f, dt in zip(frames, times):
+            print(f"{folder}/{f.name}: {dt * 1e3:.3f} ms")
         line = f"{folder}: {len(frames)} frames, {statistics.median(times) * 1e3:.3f} ms median per frame"
         if centre:
             centre.sort()

@@ -105,6 +105,9 @@ struct Seed {
     theta: f64,
     /// How far the first ray pass looks, in multiples of the seed's radius.
     reach: f64,
+    /// Which point of its blob: 0 the centroid, 1 the deepest point, 2 the
+    /// point best ringed by light.
+    kind: u8,
 }
 
 impl Seed {
@@ -312,6 +315,7 @@ impl Detector {
                 b_px: b.b_px,
                 theta: b.theta,
                 reach: 1.8,
+                kind: 0,
             }];
             let off = (b.core_px[0] - b.centre_px[0]).hypot(b.core_px[1] - b.centre_px[1]);
             if off > 0.3 * b.core_radius_px {
@@ -321,6 +325,7 @@ impl Detector {
                     b_px: b.core_radius_px,
                     theta: 0.0,
                     reach: 3.0,
+                    kind: 1,
                 });
             }
             let off = (b.ringed_px[0] - b.centre_px[0]).hypot(b.ringed_px[1] - b.centre_px[1]);
@@ -335,18 +340,25 @@ impl Detector {
                     b_px: b.ringed_radius_px,
                     theta: 0.0,
                     reach: 3.0,
+                    kind: 2,
                 });
             }
-            for (j, seed) in seeds.iter().enumerate() {
+            // A region that is cut by the border or elongated is mostly not
+            // a disc: its centroid lies off any disc in it, the point ringed
+            // by light is the likeliest disc centre, then the deepest point.
+            if !round[k] {
+                seeds.reverse();
+            }
+            for seed in &seeds {
                 // The same region at another threshold often gives nearly
                 // the same seed: its rays would find the same edges.
                 if tried.iter().any(|t| t.same_as(seed)) {
                     continue;
                 }
                 tried.push(seed.clone());
-                // The RANSAC seed of a blob is its place in the size order,
-                // whatever order it is verified in.
-                let r = self.verify_seed(image, seed, 3 * k as u64 + j as u64);
+                // The seed's random stream is fixed by its blob's place in
+                // the size order and its kind, not by the order of trying.
+                let r = self.verify_seed(image, seed, 3 * k as u64 + seed.kind as u64);
                 if let Some(v) = r
                     && best.as_ref().is_none_or(|bv| v.score > bv.score)
                 {
