@@ -1,8 +1,9 @@
 //! The whole measurement (detect + fit + pose + mount + track) per frame,
 //! single-threaded, on simulator frames:
 //! - full frame: no track, the whole frame is searched;
-//! - tracked: the tracker has measured the previous frame, so this frame is
-//!   searched near the predicted ellipse first (the live case).
+//! - tracked: the tracker has measured the two previous frames (a track
+//!   with its velocity, as in a live run), so this frame is searched near
+//!   the predicted ellipse first.
 //!
 //! Compare with `benches/opencv_baseline.py` on the same frames (written to
 //! `target/bench-frames/` by this benchmark).
@@ -15,9 +16,9 @@ use drogue_vision::measure::Measurer;
 use drogue_vision::source::sim::{camera_model, mount_config};
 use std::hint::black_box;
 
-/// Frames `k` and `k + 1` of a scenario for each pick, with a measurer set
-/// up for the scenario's camera and mount.
-fn frame_pairs(scenario: &str, picks: &[usize]) -> (Measurer, Vec<(Frame, Frame)>) {
+/// Frames `k - 1` and `k` (the track) and `k + 1` (measured) of a scenario
+/// for each pick, with a measurer set up for the scenario's camera and mount.
+fn frame_triples(scenario: &str, picks: &[usize]) -> (Measurer, Vec<([Frame; 2], Frame)>) {
     let mut sim = Simulator::new(Scenario::builtin(scenario).unwrap()).unwrap();
     let mut config = Config::embedded();
     config.mount = mount_config(sim.mount());
@@ -29,7 +30,7 @@ fn frame_pairs(scenario: &str, picks: &[usize]) -> (Measurer, Vec<(Frame, Frame)
     let last = picks.iter().copied().max().unwrap_or(0) + 1;
     let mut frames = Vec::new();
     for (i, (image, truth)) in sim.by_ref().take(last + 1).enumerate() {
-        if picks.contains(&i) || picks.contains(&(i.wrapping_sub(1))) {
+        if picks.iter().any(|&k| i + 1 >= k && i <= k + 1) {
             let _ = image.save(out.join(&truth.frame));
             frames.push((
                 i,
@@ -42,21 +43,18 @@ fn frame_pairs(scenario: &str, picks: &[usize]) -> (Measurer, Vec<(Frame, Frame)
             ));
         }
     }
-    let pairs = picks
+    let frame = |n: usize| Some(frames.iter().find(|(i, _)| *i == n)?.1.clone());
+    let triples = picks
         .iter()
-        .filter_map(|&k| {
-            let a = frames.iter().find(|(i, _)| *i == k)?.1.clone();
-            let b = frames.iter().find(|(i, _)| *i == k + 1)?.1.clone();
-            Some((a, b))
-        })
+        .filter_map(|&k| Some(([frame(k.checked_sub(1)?)?, frame(k)?], frame(k + 1)?)))
         .collect();
-    (measurer, pairs)
+    (measurer, triples)
 }
 
 fn bench(c: &mut Criterion) {
     for (scenario, picks) in [("approach", vec![60usize, 300, 540]), ("contact", vec![80])] {
-        let (mut measurer, pairs) = frame_pairs(scenario, &picks);
-        for (previous, frame) in &pairs {
+        let (mut measurer, triples) = frame_triples(scenario, &picks);
+        for (track, frame) in &triples {
             let name = format!("{scenario}/{}", frame.seq);
             c.bench_function(&format!("measure full frame {name}"), |b| {
                 b.iter(|| {
@@ -65,7 +63,9 @@ fn bench(c: &mut Criterion) {
                 })
             });
             measurer.forget_track();
-            measurer.measure(previous);
+            for previous in track {
+                measurer.measure(previous);
+            }
             let primed = measurer.clone();
             c.bench_function(&format!("measure tracked {name}"), |b| {
                 b.iter_batched(

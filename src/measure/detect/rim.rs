@@ -92,18 +92,22 @@ pub fn profile(
     let fixed = |x: f64| (x * FIXED_ONE) as i64;
     let (mut u, mut v) = (fixed(first.0), fixed(first.1));
     let (du, dv) = (fixed(step * dir[0]), fixed(step * dir[1]));
-    let (x_max, y_max) = (w as i64 - 2, h as i64 - 2);
-    out.reserve(n);
-    for _ in 0..n {
-        // Rounding may put the last position a hair outside [0, w - 1]:
-        // clamped, the weights make up for it.
-        let x0 = (u >> 32).clamp(0, x_max);
-        let y0 = (v >> 32).clamp(0, y_max);
-        // Weights rounded to the nearest 1/256 (no bias).
-        let fx = ((u - (x0 << 32) + (1 << 23)) >> 24).clamp(0, 256) as i32;
-        let fy = ((v - (y0 << 32) + (1 << 23)) >> 24).clamp(0, 256) as i32;
-        let i = y0 as usize * w + x0 as usize;
+    // Positions clamped to just below the last column and row (rounding may
+    // put the last one a hair outside the image): the pixel then is at most
+    // the second last, and its weight towards the last is 256/256.
+    let (u_max, v_max) = (((w as i64 - 1) << 32) - 1, ((h as i64 - 1) << 32) - 1);
+    out.resize(n, 0.0);
+    let mut filled = n;
+    for (k, sample) in out.iter_mut().enumerate() {
+        let (uc, vc) = (u.clamp(0, u_max), v.clamp(0, v_max));
+        let (x0, y0) = ((uc >> 32) as usize, (vc >> 32) as usize);
+        // Weights rounded to the nearest 1/256 (no bias): 0..=256.
+        let fx = (((uc & 0xffff_ffff) + (1 << 23)) >> 24) as i32;
+        let fy = (((vc & 0xffff_ffff) + (1 << 23)) >> 24) as i32;
+        let i = y0 * w + x0;
+        // Always there (the clamps keep the pixel's quad in the image).
         let Some(quad) = raw.get(i..i + w + 2) else {
+            filled = k;
             break;
         };
         let (p00, p10) = (i32::from(quad[0]), i32::from(quad[1]));
@@ -111,10 +115,11 @@ pub fn profile(
         let top = (p00 << 8) + fx * (p10 - p00);
         let bottom = (p01 << 8) + fx * (p11 - p01);
         let value = (top << 8) + fy * (bottom - top);
-        out.push(value as f32 * (1.0 / 65536.0));
+        *sample = value as f32 * (1.0 / 65536.0);
         u += du;
         v += dv;
     }
+    out.truncate(filled);
 }
 
 /// How many of the samples `0..n` pass `inside`, given that those that do
