@@ -174,12 +174,8 @@ impl Measurer {
 
         let detection = candidate.and_then(|cand| {
             let t = Instant::now();
-            let undistorted: Vec<[f64; 2]> = cand
-                .rim_points_px
-                .iter()
-                .map(|p| self.camera.undistort_px(*p))
-                .collect();
-            let fitted = self.fitter.fit(&undistorted, frame.seq).ok()?;
+            let undistorted = &cand.rim_points_undistorted_px;
+            let fitted = self.fitter.fit(undistorted, frame.seq).ok()?;
             times.fit_us = micros_since(t);
 
             let t = Instant::now();

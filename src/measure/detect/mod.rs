@@ -82,6 +82,9 @@ pub struct DetectConfig {
 pub struct RimCandidate {
     /// Sub-pixel rim points, distorted image pixels (as in the frame).
     pub rim_points_px: Vec<[f64; 2]>,
+    /// The same points undistorted (what the fit takes), pixels: the
+    /// detector has them already.
+    pub rim_points_undistorted_px: Vec<[f64; 2]>,
     /// Evidence 0..1 (dark inside, light canopy around, ellipse shape, size).
     pub score: f64,
     /// The detector's own quick ellipse of the rim, undistorted pixels: a
@@ -136,6 +139,8 @@ struct RimPass {
     /// The rays' origin, distorted pixels.
     centre: [f64; 2],
     points_px: Vec<[f64; 2]>,
+    /// The same points, undistorted.
+    undistorted: Vec<[f64; 2]>,
     residuals: Vec<f64>,
     inliers: Vec<usize>,
     /// Direction and edge distance of each point's ray.
@@ -149,6 +154,7 @@ struct RimPass {
 struct Verified {
     ellipse: Ellipse,
     points_px: Vec<[f64; 2]>,
+    undistorted: Vec<[f64; 2]>,
     score: f64,
 }
 
@@ -561,6 +567,7 @@ impl Detector {
             ellipse,
             centre,
             points_px,
+            undistorted,
             residuals,
             inliers,
             dirs,
@@ -576,6 +583,7 @@ impl Detector {
             ellipse,
             centre,
             points_px,
+            undistorted,
             residuals,
             inliers,
             dirs,
@@ -624,15 +632,18 @@ impl Detector {
         // Keep the points near the ellipse: the probe and hose outlines are
         // the fit's outliers, and fewer of them is better.
         let keep = (0.05 * ellipse.a).max(3.0 * tol);
-        let points_px = points_px
-            .into_iter()
-            .zip(&residuals)
-            .filter(|(_, r)| **r <= keep)
-            .map(|(p, _)| p)
-            .collect();
+        let near = |points: Vec<[f64; 2]>| -> Vec<[f64; 2]> {
+            points
+                .into_iter()
+                .zip(&residuals)
+                .filter(|(_, r)| **r <= keep)
+                .map(|(p, _)| p)
+                .collect()
+        };
         Some(Verified {
             ellipse,
-            points_px,
+            points_px: near(points_px),
+            undistorted: near(undistorted),
             score,
         })
     }
@@ -642,6 +653,7 @@ impl Verified {
     fn into_candidate(self) -> RimCandidate {
         RimCandidate {
             rim_points_px: self.points_px,
+            rim_points_undistorted_px: self.undistorted,
             score: self.score,
             ellipse_px: self.ellipse,
         }
