@@ -191,21 +191,32 @@ impl Blob {
     }
 }
 
-/// The level below which `fraction` of the pixels lie.
-fn percentile(pixels: &[u8], fraction: f64) -> u8 {
-    let mut hist = [0usize; 256];
-    for &p in pixels {
-        hist[p as usize] += 1;
-    }
-    let target = (pixels.len() as f64 * fraction) as usize;
-    let mut acc = 0;
-    for (level, &count) in hist.iter().enumerate() {
-        acc += count;
-        if acc > target {
-            return level as u8;
+/// The darkest level and the level below which `fraction` of the pixels
+/// lie, from one histogram.
+fn darkest_and_percentile(pixels: &[u8], fraction: f64) -> (u8, u8) {
+    // Four interleaved histograms: runs of one level (a uniform sky) would
+    // otherwise make every increment wait for the one before.
+    let mut hists = [[0u32; 256]; 4];
+    let mut quads = pixels.chunks_exact(4);
+    for q in &mut quads {
+        for (hist, &p) in hists.iter_mut().zip(q) {
+            hist[p as usize] += 1;
         }
     }
-    255
+    for &p in quads.remainder() {
+        hists[0][p as usize] += 1;
+    }
+    let count = |level: usize| hists.iter().map(|h| h[level] as usize).sum::<usize>();
+    let darkest = (0..256).find(|&l| count(l) > 0).unwrap_or(0);
+    let target = (pixels.len() as f64 * fraction) as usize;
+    let mut acc = 0;
+    for level in 0..256 {
+        acc += count(level);
+        if acc > target {
+            return (darkest as u8, level as u8);
+        }
+    }
+    (darkest as u8, 255)
 }
 
 /// Scratch for the labelling.
@@ -370,8 +381,8 @@ impl BlobFinder {
         if img.pixels.is_empty() {
             return;
         }
-        let lo = f64::from(*img.pixels.iter().min().unwrap_or(&0));
-        let hi = f64::from(percentile(&img.pixels, 0.5));
+        let (darkest, median) = darkest_and_percentile(&img.pixels, 0.5);
+        let (lo, hi) = (f64::from(darkest), f64::from(median));
         if hi - lo < min_contrast {
             return;
         }
@@ -851,7 +862,14 @@ mod tests {
                 column_sums: Vec::new(),
             };
             let lo = f64::from(*img.pixels.iter().min().unwrap());
-            let hi = f64::from(percentile(&img.pixels, 0.5));
+            let mut sorted = img.pixels.clone();
+            sorted.sort_unstable();
+            let hi = f64::from(sorted[sorted.len() / 2]);
+            assert_eq!(
+                darkest_and_percentile(&img.pixels, 0.5),
+                (lo as u8, hi as u8),
+                "trial {trial}"
+            );
             for fraction in [0.3, 0.6, 0.9] {
                 let threshold = lo + fraction * (hi - lo);
                 let mut blobs = Vec::new();
