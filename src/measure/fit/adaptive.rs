@@ -175,18 +175,19 @@ fn local_optimise(
                 path.push(v);
                 residuals(xy, &c.model, residual);
             }
-            c.sigma = robust_sigma(residual, keep, sorted);
+            c.sigma = f64::NAN;
         }
         // Shrink to k sigmas, but by at least 30 % a round: a rough model
         // has a large sigma and would otherwise never tighten.
-        let next = (cfg.adaptive_inlier_sigmas * c.sigma)
-            .min(0.7 * c.band)
-            .max(min_band);
+        let next = next_band(residual, previous, sorted, &mut c, cfg, min_band);
         let converged = next >= c.band * 0.99;
         c.band = next;
         if converged {
             break;
         }
+    }
+    if c.sigma.is_nan() {
+        c.sigma = robust_sigma(residual, previous, sorted);
     }
     let result = c.sigma.is_finite().then_some(c);
     memo.push(Optimised {
@@ -196,6 +197,49 @@ fn local_optimise(
         result,
     });
     result
+}
+
+/// The candidate's next band: k robust sigmas, but at most 70 % of the
+/// current one and never below the floor. The median is only sought when it
+/// can matter: a rough model, whose selected residuals are mostly above the
+/// 70 % cut, just shrinks (its sigma, NaN until needed, is computed at the
+/// end).
+fn next_band(
+    residual: &[f64],
+    keep: &[bool],
+    sorted: &mut Vec<f64>,
+    c: &mut Candidate,
+    cfg: &FitConfig,
+    min_band: f64,
+) -> f64 {
+    let cap = 0.7 * c.band;
+    if cap <= min_band {
+        return min_band;
+    }
+    if c.sigma.is_nan()
+        && median_at_least(residual, keep, cap / (cfg.adaptive_inlier_sigmas * 1.4826))
+    {
+        return cap;
+    }
+    if c.sigma.is_nan() {
+        c.sigma = robust_sigma(residual, keep, sorted);
+    }
+    (cfg.adaptive_inlier_sigmas * c.sigma)
+        .min(cap)
+        .max(min_band)
+}
+
+/// Whether the median (as [`robust_sigma`] picks it) of the selected
+/// residuals is at least `t`, by counting: cheaper than selecting it.
+fn median_at_least(residual: &[f64], keep: &[bool], t: f64) -> bool {
+    let (mut n, mut below) = (0usize, 0usize);
+    for (r, k) in residual.iter().zip(keep) {
+        if *k {
+            n += 1;
+            below += usize::from(*r < t);
+        }
+    }
+    n > 0 && below <= n / 2
 }
 
 /// What stages 2-3 computed in earlier rounds of subsets, by class centre:

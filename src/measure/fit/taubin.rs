@@ -12,20 +12,13 @@ use nalgebra::{Matrix5, Vector5};
 /// Taubin's ellipse of the selected points (normalised coordinates), or
 /// `None` for degenerate data or a non-ellipse.
 pub(crate) fn fit_ellipse(points: &[[f64; 2]], keep: Option<&[bool]>) -> Option<Ellipse> {
-    let selected = || {
-        points
-            .iter()
-            .enumerate()
-            .filter(move |(i, _)| keep.is_none_or(|k| k[*i]))
-            .map(|(_, p)| p)
-    };
     let mut n = 0usize;
     let (mut mx, mut my) = (0.0, 0.0);
-    for p in selected() {
+    for_selected(points, keep, |p| {
         mx += p[0];
         my += p[1];
         n += 1;
-    }
+    });
     if n < 5 {
         return None;
     }
@@ -35,7 +28,7 @@ pub(crate) fn fit_ellipse(points: &[[f64; 2]], keep: Option<&[bool]>) -> Option<
     // of z z^T is a monomial x^i y^j with i + j <= 4, and there are only 15
     // of them (S[i][j] = mean of x^i y^j), against 36 entries of z z^T.
     let mut s = [[0.0f64; 5]; 5];
-    for p in selected() {
+    for_selected(points, keep, |p| {
         let (x, y) = (p[0] - mx, p[1] - my);
         let (x2, y2, xy) = (x * x, y * y, x * y);
         s[1][0] += x;
@@ -52,7 +45,7 @@ pub(crate) fn fit_ellipse(points: &[[f64; 2]], keep: Option<&[bool]>) -> Option<
         s[2][2] += x2 * y2;
         s[1][3] += xy * y2;
         s[0][4] += y2 * y2;
-    }
+    });
     for v in s.iter_mut().flatten() {
         *v /= nf;
     }
@@ -100,6 +93,19 @@ pub(crate) fn fit_ellipse(points: &[[f64; 2]], keep: Option<&[bool]>) -> Option<
         cy: el.cy + my,
         ..el
     })
+}
+
+/// Calls `f` on each selected point, in order (a zip with the flags: no
+/// index lookups, so the moment loops stay tight).
+fn for_selected(points: &[[f64; 2]], keep: Option<&[bool]>, mut f: impl FnMut(&[f64; 2])) {
+    match keep {
+        Some(k) => points
+            .iter()
+            .zip(k)
+            .filter(|(_, k)| **k)
+            .for_each(|(p, _)| f(p)),
+        None => points.iter().for_each(f),
+    }
 }
 
 /// The generalised eigenvector of `P v = l Q v` with the smallest `l` (P
