@@ -7,6 +7,7 @@ pub mod ambiguity;
 pub mod detect;
 pub mod ellipse;
 pub mod fit;
+mod inverse_iteration;
 pub mod mount;
 pub mod pose;
 pub mod track;

@@ -69,14 +69,9 @@ pub fn fit_conic(points: &[[f64; 2]]) -> Option<Conic> {
     Some(Conic::from_matrix(&m))
 }
 
-/// The unit eigenvector of the scatter matrix with the smallest eigenvalue.
-///
-/// Inverse iteration, `v <- S^-1 v`: each step shrinks the other
-/// eigenvectors' share by the ratio of the smallest eigenvalue to theirs,
-/// tiny for points near an ellipse (the smallest is the residual, the others
-/// the data's spread), so a few steps do. Where it does not converge (noise-
-/// free points make S singular; two close eigenvalues) the full
-/// decomposition decides.
+/// The unit eigenvector of the scatter matrix with the smallest eigenvalue:
+/// inverse iteration, or the full decomposition where that does not
+/// converge (noise-free points make the matrix singular).
 fn smallest_eigenvector(scatter: &Matrix6<f64>) -> Option<Vector6<f64>> {
     inverse_iteration(scatter).or_else(|| {
         let eig = scatter.symmetric_eigen();
@@ -91,32 +86,10 @@ fn smallest_eigenvector(scatter: &Matrix6<f64>) -> Option<Vector6<f64>> {
 
 /// Inverse iteration alone; `None` when it does not converge.
 fn inverse_iteration(scatter: &Matrix6<f64>) -> Option<Vector6<f64>> {
-    let chol = scatter.cholesky()?;
     // Start: the unit circle of the normalised coordinates.
-    let mut v = Vector6::new(1.0, 0.0, 1.0, 0.0, 0.0, -1.0).normalize();
-    for _ in 0..INVERSE_ITERATIONS {
-        let mut next = chol.solve(&v);
-        let norm = next.norm();
-        if !(norm.is_finite() && norm > 0.0) {
-            return None;
-        }
-        next /= norm;
-        if next.dot(&v) < 0.0 {
-            next = -next;
-        }
-        let change = (next - v).amax();
-        v = next;
-        if change < INVERSE_TOLERANCE {
-            return Some(v);
-        }
-    }
-    None
+    let start = Vector6::new(1.0, 0.0, 1.0, 0.0, 0.0, -1.0).normalize();
+    crate::measure::inverse_iteration::smallest_eigenvector(scatter, None, start)
 }
-
-/// Steps of inverse iteration before the full decomposition takes over.
-const INVERSE_ITERATIONS: usize = 30;
-/// Converged: no entry of the unit eigenvector moves by more.
-const INVERSE_TOLERANCE: f64 = 1.0e-13;
 
 /// The conic through five points, solved directly (a 5 x 5 system with
 /// F = 1 in coordinates centred on the points: F = 0 would put their centroid

@@ -123,33 +123,10 @@ fn smallest_eigenvector(p: &Matrix5<f64>, q: &Matrix5<f64>) -> Option<Vector5<f6
 
 /// Inverse iteration alone; `None` when it does not converge.
 fn inverse_iteration(p: &Matrix5<f64>, q: &Matrix5<f64>) -> Option<Vector5<f64>> {
-    let chol = p.cholesky()?;
     // Start: the circle x^2 + y^2 (every ellipse has a share of it).
-    let mut v = Vector5::new(1.0, 0.0, 1.0, 0.0, 0.0);
-    for _ in 0..INVERSE_ITERATIONS {
-        let qv = q * v;
-        let mut next = chol.solve(&qv);
-        let norm = next.dot(&(q * next)).sqrt();
-        if !(norm.is_finite() && norm > 0.0) {
-            return None;
-        }
-        next /= norm;
-        if next.dot(&qv) < 0.0 {
-            next = -next;
-        }
-        let change = (next - v).amax();
-        v = next;
-        if change < INVERSE_TOLERANCE {
-            return Some(v);
-        }
-    }
-    None
+    let start = Vector5::new(1.0, 0.0, 1.0, 0.0, 0.0);
+    crate::measure::inverse_iteration::smallest_eigenvector(p, Some(q), start)
 }
-
-/// Steps of inverse iteration before the full decomposition takes over.
-const INVERSE_ITERATIONS: usize = 30;
-/// Converged: no entry of the (Q-normalised) eigenvector moves by more.
-const INVERSE_TOLERANCE: f64 = 1.0e-13;
 
 /// The same eigenvector from the full symmetric eigen-decomposition:
 /// `P v = l Q v  <=>  (L^-1 P L^-T) w = l w, v = L^-T w`.
