@@ -156,6 +156,25 @@ impl Conic {
         if g > 0.0 { r.abs() / g } else { f64::INFINITY }
     }
 
+    /// The square of [`Conic::sampson_distance`]: no square root, for
+    /// comparisons and medians (which the square does not change).
+    pub fn sampson_distance_sq(&self, u: f64, v: f64) -> f64 {
+        let r = self.algebraic(u, v);
+        let gu = 2.0 * self.a * u + self.b * v + self.d;
+        let gv = self.b * u + 2.0 * self.c * v + self.e;
+        let g2 = gu * gu + gv * gv;
+        if g2 > 0.0 { r * r / g2 } else { f64::INFINITY }
+    }
+
+    /// Whether a point is within `band` of the conic (first-order
+    /// distance), with neither a division nor a square root.
+    pub fn within_sampson(&self, u: f64, v: f64, band: f64) -> bool {
+        let r = self.algebraic(u, v);
+        let gu = 2.0 * self.a * u + self.b * v + self.d;
+        let gv = self.b * u + 2.0 * self.c * v + self.e;
+        r * r < band * band * (gu * gu + gv * gv)
+    }
+
     /// The ellipse of this conic (paper eqs. 3-7, computed through the
     /// eigen-decomposition so that it is exact for any scaling), or `None`
     /// when the conic is not a real ellipse.
@@ -240,6 +259,29 @@ mod tests {
         let (s, co) = e.theta.sin_cos();
         let (u, v) = (e.cx - s * (e.b + 2.0), e.cy + co * (e.b + 2.0));
         assert!((c.sampson_distance(u, v) - 2.0).abs() < 0.1);
+    }
+
+    #[test]
+    fn squared_distance_and_band_test_agree_with_the_distance() {
+        let e = Ellipse::new(300.0, 200.0, 90.0, 40.0, 0.7);
+        let c = e.to_conic();
+        // Points 0..3 px off the rim, inside and outside (the distance
+        // itself is checked above).
+        for k in 0..72 {
+            let t = k as f64 * 0.09;
+            let off = 3.0 * ((k % 7) as f64 / 6.0) * if k % 2 == 0 { 1.0 } else { -1.0 };
+            let [u, v] = e.point_at(t);
+            let (dx, dy) = (u - e.cx, v - e.cy);
+            let n = dx.hypot(dy);
+            let (u, v) = (u + off * dx / n, v + off * dy / n);
+            let d = c.sampson_distance(u, v);
+            assert!((c.sampson_distance_sq(u, v) - d * d).abs() <= 1e-12 * (1.0 + d * d));
+            for band in [0.5, 1.0, 2.0, 2.5] {
+                if (d - band).abs() > 1e-9 {
+                    assert_eq!(c.within_sampson(u, v, band), d < band, "{d} {band}");
+                }
+            }
+        }
     }
 
     #[test]

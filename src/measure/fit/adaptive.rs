@@ -43,20 +43,23 @@ fn from_vector(v: &[f64; 5]) -> Option<Ellipse> {
     (b > 0.0 && a.is_finite()).then(|| Ellipse::new(v[0], v[1], a, b, 0.5 * v[4].atan2(v[3])))
 }
 
-/// First-order (Sampson) distance of every point to `e`, into `out`.
-/// Computed once per model: the inlier selection and the robust sigma both
-/// read it.
-fn residuals(pts: &[[f64; 2]], e: &Ellipse, out: &mut Vec<f64>) {
+/// Squared first-order (Sampson) distance of every point to `e`, into
+/// `out`. Computed once per model: the inlier selection and the robust sigma
+/// both read it. Squared, because neither needs the root: a band compares
+/// with its square, and the root of the median is the median of the roots.
+fn residuals_sq(pts: &[[f64; 2]], e: &Ellipse, out: &mut Vec<f64>) {
     let conic = e.to_conic();
     out.clear();
-    out.extend(pts.iter().map(|p| conic.sampson_distance(p[0], p[1])));
+    out.extend(pts.iter().map(|p| conic.sampson_distance_sq(p[0], p[1])));
 }
 
-/// Marks the points whose residual is within `band`.
-fn select(residual: &[f64], band: f64, out: &mut [bool]) -> usize {
+/// Marks the points within `band` (their squared residual below its
+/// square).
+fn select(residual_sq: &[f64], band: f64, out: &mut [bool]) -> usize {
+    let band_sq = band * band;
     let mut count = 0;
-    for (r, k) in residual.iter().zip(out.iter_mut()) {
-        *k = *r < band;
+    for (r, k) in residual_sq.iter().zip(out.iter_mut()) {
+        *k = *r < band_sq;
         count += usize::from(*k);
     }
     count
@@ -64,10 +67,10 @@ fn select(residual: &[f64], band: f64, out: &mut [bool]) -> usize {
 
 /// Robust sigma (1.4826 * median absolute first-order residual) of the
 /// selected points.
-fn robust_sigma(residual: &[f64], keep: &[bool], scratch: &mut Vec<f64>) -> f64 {
+fn robust_sigma(residual_sq: &[f64], keep: &[bool], scratch: &mut Vec<f64>) -> f64 {
     scratch.clear();
     scratch.extend(
-        residual
+        residual_sq
             .iter()
             .zip(keep)
             .filter(|(_, k)| **k)
@@ -77,8 +80,8 @@ fn robust_sigma(residual: &[f64], keep: &[bool], scratch: &mut Vec<f64>) -> f64 
         return f64::INFINITY;
     }
     let mid = scratch.len() / 2;
-    let (_, median, _) = scratch.select_nth_unstable_by(mid, f64::total_cmp);
-    1.4826 * *median
+    let (_, median_sq, _) = scratch.select_nth_unstable_by(mid, f64::total_cmp);
+    1.4826 * median_sq.sqrt()
 }
 
 /// Whether a subset's ellipse could be the rim of this data (normalised
@@ -96,7 +99,7 @@ const MAX_AXIS_DATA: f64 = 5.0;
 fn support(pts: &[[f64; 2]], e: &Ellipse, band: f64) -> usize {
     let conic = e.to_conic();
     pts.iter()
-        .filter(|p| conic.sampson_distance(p[0], p[1]) < band)
+        .filter(|p| conic.within_sampson(p[0], p[1], band))
         .count()
 }
 
@@ -134,12 +137,20 @@ fn local_optimise(
     };
     // The same start (a class centre that did not change between rounds of
     // subsets) takes the same path: replay its recorded models against this
-    // round's finished candidates instead of optimising it again.
-    if let Some(m) = memo.iter().find(|m| m.start == *start && m.band == band) {
+    // round's finished candidates instead of optimising it again. A path
+    // that was cut short as a duplicate, and is none now, is optimised anew.
+    if let Some(k) = memo
+        .iter()
+        .position(|m| m.start == *start && m.band == band)
+    {
+        let m = &memo[k];
         if m.path.iter().any(is_duplicate) {
             return None;
         }
-        return m.result;
+        if !m.dropped {
+            return m.result;
+        }
+        memo.swap_remove(k);
     }
     let mut path = Vec::new();
     let mut c = Candidate {
@@ -148,17 +159,18 @@ fn local_optimise(
         sigma: f64::INFINITY,
     };
     let Scratch {
-        residual,
+        residual_sq,
         sorted,
         keep,
         previous,
+        moments,
     } = scratch;
     keep.clear();
     keep.resize(xy.len(), false);
     previous.clear();
-    residuals(xy, &c.model, residual);
+    residuals_sq(xy, &c.model, residual_sq);
     for _ in 0..cfg.adaptive_refine_rounds {
-        if select(residual, c.band, keep) < 5 {
+        if select(residual_sq, c.band, keep) < 5 {
             break;
         }
         // With the same points as the last round, the refit, its residuals
@@ -166,20 +178,27 @@ fn local_optimise(
         // shrinks for several rounds without dropping a point).
         if *previous != *keep {
             previous.clone_from(keep);
-            if let Some(e) = taubin::fit_ellipse(xy, Some(keep)).filter(plausible) {
+            if let Some(e) = moments.fit(keep).filter(plausible) {
                 c.model = e;
                 let v = to_vector(&e);
+                path.push(v);
                 if is_duplicate(&v) {
+                    memo.push(Optimised {
+                        start: *start,
+                        band,
+                        path,
+                        result: None,
+                        dropped: true,
+                    });
                     return None;
                 }
-                path.push(v);
-                residuals(xy, &c.model, residual);
+                residuals_sq(xy, &c.model, residual_sq);
             }
             c.sigma = f64::NAN;
         }
         // Shrink to k sigmas, but by at least 30 % a round: a rough model
         // has a large sigma and would otherwise never tighten.
-        let next = next_band(residual, previous, sorted, &mut c, cfg, min_band);
+        let next = next_band(residual_sq, previous, sorted, &mut c, cfg, min_band);
         let converged = next >= c.band * 0.99;
         c.band = next;
         if converged {
@@ -187,7 +206,7 @@ fn local_optimise(
         }
     }
     if c.sigma.is_nan() {
-        c.sigma = robust_sigma(residual, previous, sorted);
+        c.sigma = robust_sigma(residual_sq, previous, sorted);
     }
     let result = c.sigma.is_finite().then_some(c);
     memo.push(Optimised {
@@ -195,6 +214,7 @@ fn local_optimise(
         band,
         path,
         result,
+        dropped: false,
     });
     result
 }
@@ -205,7 +225,7 @@ fn local_optimise(
 /// 70 % cut, just shrinks (its sigma, NaN until needed, is computed at the
 /// end).
 fn next_band(
-    residual: &[f64],
+    residual_sq: &[f64],
     keep: &[bool],
     sorted: &mut Vec<f64>,
     c: &mut Candidate,
@@ -217,12 +237,16 @@ fn next_band(
         return min_band;
     }
     if c.sigma.is_nan()
-        && median_at_least(residual, keep, cap / (cfg.adaptive_inlier_sigmas * 1.4826))
+        && median_at_least(
+            residual_sq,
+            keep,
+            cap / (cfg.adaptive_inlier_sigmas * 1.4826),
+        )
     {
         return cap;
     }
     if c.sigma.is_nan() {
-        c.sigma = robust_sigma(residual, keep, sorted);
+        c.sigma = robust_sigma(residual_sq, keep, sorted);
     }
     (cfg.adaptive_inlier_sigmas * c.sigma)
         .min(cap)
@@ -231,12 +255,13 @@ fn next_band(
 
 /// Whether the median (as [`robust_sigma`] picks it) of the selected
 /// residuals is at least `t`, by counting: cheaper than selecting it.
-fn median_at_least(residual: &[f64], keep: &[bool], t: f64) -> bool {
+fn median_at_least(residual_sq: &[f64], keep: &[bool], t: f64) -> bool {
+    let t_sq = t * t;
     let (mut n, mut below) = (0usize, 0usize);
-    for (r, k) in residual.iter().zip(keep) {
+    for (r, k) in residual_sq.iter().zip(keep) {
         if *k {
             n += 1;
-            below += usize::from(*r < t);
+            below += usize::from(*r < t_sq);
         }
     }
     n > 0 && below <= n / 2
@@ -250,23 +275,26 @@ struct Memo {
     optimised: Vec<Optimised>,
 }
 
-/// A completed local optimisation: its start, the models it passed through
-/// (each checked against the earlier candidates) and its result.
+/// A local optimisation: its start, the models it passed through (each
+/// checked against the earlier candidates) and its result, or that it was
+/// dropped at its last model as a duplicate of an earlier candidate.
 struct Optimised {
     start: Ellipse,
     band: f64,
     path: Vec<[f64; 5]>,
     result: Option<Candidate>,
+    dropped: bool,
 }
 
-/// Reused buffers: residuals of every point, the selected ones for the
-/// median, and the selection (this round's and the last one's).
-#[derive(Default)]
+/// Reused buffers: squared residuals of every point, the selected ones for the
+/// median, the selection (this round's and the last one's), and Taubin's
+/// moments of the local optimisation's points (which follow the selection).
 struct Scratch {
-    residual: Vec<f64>,
+    residual_sq: Vec<f64>,
     sorted: Vec<f64>,
     keep: Vec<bool>,
     previous: Vec<bool>,
+    moments: taubin::RunningMoments,
 }
 
 /// Points used to score class centres and to optimise candidates locally
@@ -401,10 +429,11 @@ pub(crate) fn fit(
     let score_pts = subsample(xy, MAX_SCORE_POINTS);
     let lo_pts = subsample(xy, MAX_LO_POINTS);
     let mut scratch = Scratch {
-        residual: Vec::with_capacity(xy.len()),
+        residual_sq: Vec::with_capacity(xy.len()),
         sorted: Vec::with_capacity(xy.len()),
         keep: Vec::with_capacity(xy.len()),
         previous: Vec::with_capacity(xy.len()),
+        moments: taubin::RunningMoments::new(&lo_pts),
     };
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let max_subsets = cfg.adaptive_subsets;
@@ -448,12 +477,14 @@ pub(crate) fn fit(
     // stable (cheap), then the geometric refit of that set; if its band
     // then selects other points, one more geometric refit.
     let Scratch {
-        residual, sorted, ..
+        residual_sq,
+        sorted,
+        ..
     } = &mut scratch;
     let (mut model, mut band) = (winner.model, winner.band);
     let mut keep = vec![false; xy.len()];
-    residuals(xy, &model, residual);
-    let mut count = select(residual, band, &mut keep);
+    residuals_sq(xy, &model, residual_sq);
+    let mut count = select(residual_sq, band, &mut keep);
     let mut next = vec![false; xy.len()];
     for _ in 0..3 {
         if count < 5 {
@@ -461,10 +492,11 @@ pub(crate) fn fit(
         }
         if let Some(e) = taubin::fit_ellipse(xy, Some(&keep)).filter(plausible) {
             model = e;
-            residuals(xy, &model, residual);
+            residuals_sq(xy, &model, residual_sq);
         }
-        band = (cfg.adaptive_inlier_sigmas * robust_sigma(residual, &keep, sorted)).max(min_band);
-        count = select(residual, band, &mut next);
+        band =
+            (cfg.adaptive_inlier_sigmas * robust_sigma(residual_sq, &keep, sorted)).max(min_band);
+        count = select(residual_sq, band, &mut next);
         let stable = next == keep;
         std::mem::swap(&mut keep, &mut next);
         if stable {
@@ -487,10 +519,10 @@ pub(crate) fn fit(
         }
         model = refined;
         used = Some(keep.clone());
-        residuals(xy, &model, residual);
-        let sigma = robust_sigma(residual, &keep, sorted);
+        residuals_sq(xy, &model, residual_sq);
+        let sigma = robust_sigma(residual_sq, &keep, sorted);
         band = (cfg.adaptive_inlier_sigmas * sigma).max(min_band);
-        count = select(residual, band, &mut next);
+        count = select(residual_sq, band, &mut next);
         if next == keep {
             break;
         }

@@ -165,6 +165,10 @@ fn evaluate(
 /// the data has unit RMS radius) ends the refinement.
 const CONVERGED_STEP: f64 = 1.0e-7;
 
+/// A step shorter than this (normalised coordinates) is the last, and is
+/// taken without checking that it lowers the cost.
+const UNCHECKED_STEP: f64 = 1.0e-6;
+
 /// Minimises the orthogonal distances of `points` to the ellipse, starting
 /// from `init`. Never returns a worse ellipse than `init`.
 pub(crate) fn refine(points: &[[f64; 2]], init: &Ellipse, iterations: usize) -> Ellipse {
@@ -190,12 +194,6 @@ pub(crate) fn refine(points: &[[f64; 2]], init: &Ellipse, iterations: usize) -> 
             continue;
         };
         let delta = chol.solve(&(-grad));
-        // Converged: the next step would move the outline by < 1e-7 of the
-        // data's size (normalised coordinates); not worth a pass over the
-        // points to take it.
-        if delta.norm() < CONVERGED_STEP {
-            break;
-        }
         let cand = Ellipse {
             cx: best.cx + delta[0],
             cy: best.cy + delta[1],
@@ -206,6 +204,15 @@ pub(crate) fn refine(points: &[[f64; 2]], init: &Ellipse, iterations: usize) -> 
         if !(cand.a > 0.0 && cand.b > 0.0 && delta.iter().all(|v| v.is_finite())) {
             lambda *= 10.0;
             continue;
+        }
+        // Converged: near the optimum Gauss-Newton converges quadratically
+        // (steps of 1e-4, 1e-7, 1e-11 of the data's size), so a step this
+        // small is taken without a pass over the points to check its cost:
+        // it moves the outline by < 1e-6 of the data's size, and the one
+        // after it would be far smaller still.
+        if delta.norm() < UNCHECKED_STEP {
+            best = cand;
+            break;
         }
         trial_params.copy_from_slice(&params);
         let (c2, h2, g2) = evaluate(&cand, points, &mut trial_params, true);

@@ -12,87 +12,13 @@ use nalgebra::{Matrix5, Vector5};
 /// Taubin's ellipse of the selected points (normalised coordinates), or
 /// `None` for degenerate data or a non-ellipse.
 pub(crate) fn fit_ellipse(points: &[[f64; 2]], keep: Option<&[bool]>) -> Option<Ellipse> {
-    let mut n = 0usize;
-    let (mut mx, mut my) = (0.0, 0.0);
+    let mut sums = Monomials::default();
+    let mut count = 0usize;
     for_selected(points, keep, |p| {
-        mx += p[0];
-        my += p[1];
-        n += 1;
+        sums.add(&Monomials::of(p));
+        count += 1;
     });
-    if n < 5 {
-        return None;
-    }
-    let nf = n as f64;
-    let (mx, my) = (mx / nf, my / nf);
-    // Moments of z = [x^2, xy, y^2, x, y, 1] over centred data: every entry
-    // of z z^T is a monomial x^i y^j with i + j <= 4, and there are only 15
-    // of them (S[i][j] = mean of x^i y^j), against 36 entries of z z^T.
-    let mut s = [[0.0f64; 5]; 5];
-    for_selected(points, keep, |p| {
-        let (x, y) = (p[0] - mx, p[1] - my);
-        let (x2, y2, xy) = (x * x, y * y, x * y);
-        s[1][0] += x;
-        s[0][1] += y;
-        s[2][0] += x2;
-        s[1][1] += xy;
-        s[0][2] += y2;
-        s[3][0] += x2 * x;
-        s[2][1] += x2 * y;
-        s[1][2] += x * y2;
-        s[0][3] += y2 * y;
-        s[4][0] += x2 * x2;
-        s[3][1] += x2 * xy;
-        s[2][2] += x2 * y2;
-        s[1][3] += xy * y2;
-        s[0][4] += y2 * y2;
-    });
-    for v in s.iter_mut().flatten() {
-        *v /= nf;
-    }
-    s[0][0] = 1.0;
-    // Exponents (of x, of y) of each entry of z.
-    const EXP: [(usize, usize); 6] = [(2, 0), (1, 1), (0, 2), (1, 0), (0, 1), (0, 0)];
-    let m = |i: usize, j: usize| s[EXP[i].0 + EXP[j].0][EXP[i].1 + EXP[j].1];
-    // P: moments with F eliminated (F = -(A zxx + B zxy + C zyy)).
-    let mut p = Matrix5::<f64>::zeros();
-    for i in 0..5 {
-        for j in 0..5 {
-            p[(i, j)] = if i < 3 && j < 3 {
-                m(i, j) - m(i, 5) * m(j, 5)
-            } else {
-                m(i, j)
-            };
-        }
-    }
-    let (sxx, sxy, syy) = (m(0, 5), m(1, 5), m(2, 5));
-    #[rustfmt::skip]
-    let q = Matrix5::new(
-        4.0 * sxx, 2.0 * sxy, 0.0, 0.0, 0.0,
-        2.0 * sxy, sxx + syy, 2.0 * sxy, 0.0, 0.0,
-        0.0, 2.0 * sxy, 4.0 * syy, 0.0, 0.0,
-        0.0, 0.0, 0.0, 1.0, 0.0,
-        0.0, 0.0, 0.0, 0.0, 1.0,
-    );
-    if !p.iter().chain(q.iter()).all(|v| v.is_finite()) {
-        return None;
-    }
-    let v = smallest_eigenvector(&p, &q)?;
-    let (a, b, cc, d, e) = (v[0], v[1], v[2], v[3], v[4]);
-    let f = -(a * sxx + b * sxy + cc * syy);
-    let conic = Conic {
-        a,
-        b,
-        c: cc,
-        d,
-        e,
-        f,
-    };
-    let el = conic_to_ellipse(&conic)?;
-    Some(Ellipse {
-        cx: el.cx + mx,
-        cy: el.cy + my,
-        ..el
-    })
+    fit_moments(&sums, count)
 }
 
 /// Calls `f` on each selected point, in order (a zip with the flags: no
@@ -106,6 +32,175 @@ fn for_selected(points: &[[f64; 2]], keep: Option<&[bool]>, mut f: impl FnMut(&[
             .for_each(|(p, _)| f(p)),
         None => points.iter().for_each(f),
     }
+}
+
+/// The 14 monomials `x^i y^j` (1 <= i + j <= 4) of a point: every entry of
+/// Taubin's moment matrices is a mean of one of them.
+#[derive(Clone, Copy, Default)]
+pub(crate) struct Monomials([f64; 14]);
+
+impl Monomials {
+    pub fn of(p: &[f64; 2]) -> Self {
+        let (x, y) = (p[0], p[1]);
+        let (x2, xy, y2) = (x * x, x * y, y * y);
+        Self([
+            x,
+            y,
+            x2,
+            xy,
+            y2,
+            x2 * x,
+            x2 * y,
+            x * y2,
+            y2 * y,
+            x2 * x2,
+            x2 * xy,
+            x2 * y2,
+            xy * y2,
+            y2 * y2,
+        ])
+    }
+
+    fn add(&mut self, other: &Self) {
+        self.0.iter_mut().zip(&other.0).for_each(|(s, v)| *s += v);
+    }
+
+    fn sub(&mut self, other: &Self) {
+        self.0.iter_mut().zip(&other.0).for_each(|(s, v)| *s -= v);
+    }
+}
+
+/// Taubin's moments of a selection that changes a little at a time (the
+/// local optimisation drops or adds a few points a round): the sums follow
+/// the selection by the points that changed, instead of a pass over all.
+#[derive(Default)]
+pub(crate) struct RunningMoments {
+    monomials: Vec<Monomials>,
+    selected: Vec<bool>,
+    sums: Monomials,
+    count: usize,
+}
+
+impl RunningMoments {
+    /// Moments over `points`, nothing selected yet.
+    pub fn new(points: &[[f64; 2]]) -> Self {
+        Self {
+            monomials: points.iter().map(Monomials::of).collect(),
+            selected: vec![false; points.len()],
+            sums: Monomials::default(),
+            count: 0,
+        }
+    }
+
+    /// Taubin's ellipse of the points `keep` selects (one flag a point).
+    pub fn fit(&mut self, keep: &[bool]) -> Option<Ellipse> {
+        self.select(keep);
+        fit_moments(&self.sums, self.count)
+    }
+
+    /// Brings the sums to `keep`. When most points changed, they are summed
+    /// afresh: that is as cheap, and it keeps rounding from piling up.
+    fn select(&mut self, keep: &[bool]) {
+        let changed = self
+            .selected
+            .iter()
+            .zip(keep)
+            .filter(|(s, k)| s != k)
+            .count();
+        if changed == 0 {
+            return;
+        }
+        if 2 * changed > self.count {
+            self.sums = Monomials::default();
+            self.count = 0;
+            for (m, k) in self.monomials.iter().zip(keep) {
+                if *k {
+                    self.sums.add(m);
+                    self.count += 1;
+                }
+            }
+        } else {
+            for ((m, s), k) in self.monomials.iter().zip(&self.selected).zip(keep) {
+                if s != k {
+                    if *k {
+                        self.sums.add(m);
+                        self.count += 1;
+                    } else {
+                        self.sums.sub(m);
+                        self.count -= 1;
+                    }
+                }
+            }
+        }
+        self.selected.copy_from_slice(keep);
+    }
+}
+
+/// Taubin's ellipse from the monomial sums of `count` points.
+///
+/// The moments are taken about the origin, not the selection's centroid, so
+/// that sums can be updated point by point; the fit is invariant under
+/// translation, and in the fitter's normalised coordinates (origin at the
+/// data's centroid, unit RMS radius) this costs no precision.
+fn fit_moments(sums: &Monomials, count: usize) -> Option<Ellipse> {
+    if count < 5 {
+        return None;
+    }
+    let nf = count as f64;
+    // s[i][j]: mean of x^i y^j.
+    let mut s = [[0.0f64; 5]; 5];
+    const INDEX: [(usize, usize); 14] = [
+        (1, 0),
+        (0, 1),
+        (2, 0),
+        (1, 1),
+        (0, 2),
+        (3, 0),
+        (2, 1),
+        (1, 2),
+        (0, 3),
+        (4, 0),
+        (3, 1),
+        (2, 2),
+        (1, 3),
+        (0, 4),
+    ];
+    for ((i, j), v) in INDEX.iter().zip(&sums.0) {
+        s[*i][*j] = v / nf;
+    }
+    s[0][0] = 1.0;
+    // Exponents (of x, of y) of each entry of z = [x^2, xy, y^2, x, y, 1].
+    const EXP: [(usize, usize); 6] = [(2, 0), (1, 1), (0, 2), (1, 0), (0, 1), (0, 0)];
+    let m = |i: usize, j: usize| s[EXP[i].0 + EXP[j].0][EXP[i].1 + EXP[j].1];
+    // P: the moments of z with F eliminated (F = -(mean of z) . [A..E]).
+    let p = Matrix5::<f64>::from_fn(|i, j| m(i, j) - m(i, 5) * m(j, 5));
+    // Q: the mean of grad z grad z^T (z_x = [2x, y, 0, 1, 0], z_y = [0, x,
+    // 2y, 0, 1]).
+    let (sx, sy) = (s[1][0], s[0][1]);
+    let (sxx, sxy, syy) = (s[2][0], s[1][1], s[0][2]);
+    #[rustfmt::skip]
+    let q = Matrix5::new(
+        4.0 * sxx, 2.0 * sxy, 0.0, 2.0 * sx, 0.0,
+        2.0 * sxy, sxx + syy, 2.0 * sxy, sy, sx,
+        0.0, 2.0 * sxy, 4.0 * syy, 0.0, 2.0 * sy,
+        2.0 * sx, sy, 0.0, 1.0, 0.0,
+        0.0, sx, 2.0 * sy, 0.0, 1.0,
+    );
+    if !p.iter().chain(q.iter()).all(|v| v.is_finite()) {
+        return None;
+    }
+    let v = smallest_eigenvector(&p, &q)?;
+    let (a, b, cc, d, e) = (v[0], v[1], v[2], v[3], v[4]);
+    let f = -(a * sxx + b * sxy + cc * syy + d * sx + e * sy);
+    let conic = Conic {
+        a,
+        b,
+        c: cc,
+        d,
+        e,
+        f,
+    };
+    conic_to_ellipse(&conic)
 }
 
 /// The generalised eigenvector of `P v = l Q v` with the smallest `l` (P
@@ -231,6 +326,45 @@ mod tests {
                 (fast - full).amax() < 1e-7,
                 "trial {trial}: {fast} vs {full}"
             );
+        }
+    }
+
+    #[test]
+    fn running_moments_follow_the_selection() {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(9);
+        let truth = Ellipse::new(0.1, -0.3, 1.3, 0.8, 0.6);
+        let pts: Vec<[f64; 2]> = (0..200)
+            .map(|k| {
+                let p = truth.point_at(k as f64 * 0.025);
+                [
+                    p[0] + 0.002 * rng.random_range(-1.0..1.0),
+                    p[1] + 0.002 * rng.random_range(-1.0..1.0),
+                ]
+            })
+            .collect();
+        let mut running = RunningMoments::new(&pts);
+        let mut keep = vec![true; pts.len()];
+        // Small changes (updated point by point), then a big one (summed
+        // afresh), then small ones again: each fit must equal the one from
+        // scratch.
+        for round in 0..40 {
+            let flips = if round == 20 {
+                150
+            } else {
+                rng.random_range(1..12)
+            };
+            for _ in 0..flips {
+                let i = rng.random_range(0..pts.len());
+                keep[i] = !keep[i];
+            }
+            let fresh = fit_ellipse(&pts, Some(&keep)).unwrap();
+            let followed = running.fit(&keep).unwrap();
+            assert!(
+                followed.max_param_error_px(&fresh) < 1e-9,
+                "round {round}: {followed:?} vs {fresh:?}"
+            );
+            assert!(followed.theta_error_rad(&fresh) < 1e-9);
         }
     }
 
