@@ -90,25 +90,59 @@ pub fn profile(
     let first = at(0);
     // Truncated (no libm call): off by less than 2^-32 pixels.
     let fixed = |x: f64| (x * FIXED_ONE) as i64;
-    let (mut u, mut v) = (fixed(first.0), fixed(first.1));
+    let (u, v) = (fixed(first.0), fixed(first.1));
     let (du, dv) = (fixed(step * dir[0]), fixed(step * dir[1]));
     // Positions clamped to just below the last column and row (rounding may
     // put the last one a hair outside the image): the pixel then is at most
     // the second last, and its weight towards the last is 256/256.
     let (u_max, v_max) = (((w as i64 - 1) << 32) - 1, ((h as i64 - 1) << 32) - 1);
     out.resize(n, 0.0);
-    let mut filled = n;
+    // Positions are linear in k: when the first and the last are within the
+    // clamp range, all are, and the loop needs no clamps.
+    let last = n as i64 - 1;
+    let (u_last, v_last) = (u + last * du, v + last * dv);
+    let filled = if [u, u_last].iter().all(|x| (0..=u_max).contains(x))
+        && [v, v_last].iter().all(|y| (0..=v_max).contains(y))
+    {
+        fill_fixed(raw, w, out, (u, v), (du, dv), |x| x, |y| y)
+    } else {
+        fill_fixed(
+            raw,
+            w,
+            out,
+            (u, v),
+            (du, dv),
+            |x| x.clamp(0, u_max),
+            |y| y.clamp(0, v_max),
+        )
+    };
+    out.truncate(filled);
+}
+
+/// Fills `out` with the fixed-point bilinear samples from `start` by `step`
+/// (32.32 pixel positions, each passed through `clamp_u` and `clamp_v`);
+/// returns how many were filled (all, as the clamps keep every pixel's quad
+/// in the image).
+#[inline(always)]
+fn fill_fixed(
+    raw: &[u8],
+    w: usize,
+    out: &mut [f32],
+    start: (i64, i64),
+    step: (i64, i64),
+    clamp_u: impl Fn(i64) -> i64,
+    clamp_v: impl Fn(i64) -> i64,
+) -> usize {
+    let ((mut u, mut v), (du, dv)) = (start, step);
     for (k, sample) in out.iter_mut().enumerate() {
-        let (uc, vc) = (u.clamp(0, u_max), v.clamp(0, v_max));
+        let (uc, vc) = (clamp_u(u), clamp_v(v));
         let (x0, y0) = ((uc >> 32) as usize, (vc >> 32) as usize);
         // Weights rounded to the nearest 1/256 (no bias): 0..=256.
         let fx = (((uc & 0xffff_ffff) + (1 << 23)) >> 24) as i32;
         let fy = (((vc & 0xffff_ffff) + (1 << 23)) >> 24) as i32;
         let i = y0 * w + x0;
-        // Always there (the clamps keep the pixel's quad in the image).
         let Some(quad) = raw.get(i..i + w + 2) else {
-            filled = k;
-            break;
+            return k;
         };
         let (p00, p10) = (i32::from(quad[0]), i32::from(quad[1]));
         let (p01, p11) = (i32::from(quad[w]), i32::from(quad[w + 1]));
@@ -119,7 +153,7 @@ pub fn profile(
         u += du;
         v += dv;
     }
-    out.truncate(filled);
+    out.len()
 }
 
 /// How many of the samples `0..n` pass `inside`, given that those that do
