@@ -274,3 +274,26 @@ fn small_disc_with_a_hose_beside_a_large_dark_area_in_many_parts() {
     let e = conic_fit::fit_ellipse(&on_rim).unwrap();
     assert!(truth.max_param_error_px(&e) < 0.15, "{e:?}");
 }
+
+#[test]
+fn ray_directions_are_the_angles_around_the_circle() {
+    for n in [1usize, 24, 173, 400] {
+        let dirs: Vec<[f64; 2]> = super::ray_directions(n).collect();
+        assert_eq!(dirs.len(), n);
+        for (k, d) in dirs.iter().enumerate() {
+            let phi = std::f64::consts::TAU * k as f64 / n as f64;
+            assert!((d[0] - phi.cos()).abs() < 1e-13 && (d[1] - phi.sin()).abs() < 1e-13);
+        }
+    }
+    // The radius along a direction, both ways.
+    let (a, b, theta) = (30.0, 12.0, 0.4);
+    for phi in [0.0f64, 0.4, 1.0, 2.5, 5.0] {
+        let (s, c) = (phi - theta).sin_cos();
+        let r = super::polar_radius(a, b, theta, phi);
+        assert!((r - super::polar_radius_local(a, b, c, s)).abs() < 1e-12);
+        // The point at that radius lies on the ellipse.
+        let (x, y) = (r * c, r * s);
+        assert!(((x / a).powi(2) + (y / b).powi(2) - 1.0).abs() < 1e-12);
+    }
+    assert!((super::polar_radius(a, b, theta, theta) - a).abs() < 1e-12);
+}
