@@ -149,30 +149,30 @@ impl Conic {
     /// First-order geometric distance (Sampson): the algebraic residual over
     /// its gradient's length. Exact to first order near the curve.
     pub fn sampson_distance(&self, u: f64, v: f64) -> f64 {
-        let r = self.algebraic(u, v);
-        let gu = 2.0 * self.a * u + self.b * v + self.d;
-        let gv = self.b * u + 2.0 * self.c * v + self.e;
-        let g = (gu * gu + gv * gv).sqrt();
+        let (r, g2) = self.residual_and_gradient_sq(u, v);
+        let g = g2.sqrt();
         if g > 0.0 { r.abs() / g } else { f64::INFINITY }
     }
 
     /// The square of [`Conic::sampson_distance`]: no square root, for
     /// comparisons and medians (which the square does not change).
     pub fn sampson_distance_sq(&self, u: f64, v: f64) -> f64 {
-        let r = self.algebraic(u, v);
-        let gu = 2.0 * self.a * u + self.b * v + self.d;
-        let gv = self.b * u + 2.0 * self.c * v + self.e;
-        let g2 = gu * gu + gv * gv;
+        let (r, g2) = self.residual_and_gradient_sq(u, v);
         if g2 > 0.0 { r * r / g2 } else { f64::INFINITY }
     }
 
     /// Whether a point is within `band` of the conic (first-order
     /// distance), with neither a division nor a square root.
     pub fn within_sampson(&self, u: f64, v: f64, band: f64) -> bool {
-        let r = self.algebraic(u, v);
+        let (r, g2) = self.residual_and_gradient_sq(u, v);
+        r * r < band * band * g2
+    }
+
+    /// The algebraic residual at a point and its gradient's squared length.
+    fn residual_and_gradient_sq(&self, u: f64, v: f64) -> (f64, f64) {
         let gu = 2.0 * self.a * u + self.b * v + self.d;
         let gv = self.b * u + 2.0 * self.c * v + self.e;
-        r * r < band * band * (gu * gu + gv * gv)
+        (self.algebraic(u, v), gu * gu + gv * gv)
     }
 
     /// The ellipse of this conic (paper eqs. 3-7, computed through the
