@@ -2,8 +2,10 @@
 //! which removes most of the bias (shrinkage) of the A+C=1 fit on partial
 //! arcs. It seeds the orthogonal-distance refinement.
 //!
-//! Follows Chernov's formulation (data centred, F eliminated, a 5x5
-//! generalised symmetric eigenproblem with a positive definite right side).
+//! Follows Chernov's formulation (F eliminated, a 5x5 generalised symmetric
+//! eigenproblem with a positive definite right side), with the moments taken
+//! about the origin of the fitter's normalised coordinates rather than the
+//! selection's centroid, so that they can follow a changing selection.
 
 use super::least_squares::conic_to_ellipse;
 use crate::measure::ellipse::{Conic, Ellipse};
@@ -92,14 +94,19 @@ impl RunningMoments {
         }
     }
 
-    /// Taubin's ellipse of the points `keep` selects (one flag a point).
+    /// Taubin's ellipse of the points `keep` selects (one flag a point;
+    /// `None` if `keep` does not have one flag for each point).
     pub fn fit(&mut self, keep: &[bool]) -> Option<Ellipse> {
+        if keep.len() != self.selected.len() {
+            return None;
+        }
         self.select(keep);
         fit_moments(&self.sums, self.count)
     }
 
-    /// Brings the sums to `keep`. When most points changed, they are summed
-    /// afresh: that is as cheap, and it keeps rounding from piling up.
+    /// Brings the sums to `keep`. When more points changed than half of
+    /// those selected, they are summed afresh: that is as cheap, and it keeps
+    /// rounding from piling up.
     fn select(&mut self, keep: &[bool]) {
         let changed = self
             .selected
@@ -366,6 +373,8 @@ mod tests {
             );
             assert!(followed.theta_error_rad(&fresh) < 1e-9);
         }
+        // A selection of the wrong length is no fit (and no panic).
+        assert!(running.fit(&keep[..10]).is_none());
     }
 
     #[test]
