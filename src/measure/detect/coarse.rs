@@ -206,17 +206,18 @@ fn darkest_and_percentile(pixels: &[u8], fraction: f64) -> (u8, u8) {
     for &p in quads.remainder() {
         hists[0][p as usize] += 1;
     }
-    let count = |level: usize| hists.iter().map(|h| h[level] as usize).sum::<usize>();
-    let darkest = (0..256).find(|&l| count(l) > 0).unwrap_or(0);
+    let hist: [usize; 256] =
+        std::array::from_fn(|level| hists.iter().map(|h| h[level] as usize).sum());
+    let darkest = hist.iter().position(|&c| c > 0).unwrap_or(0) as u8;
     let target = (pixels.len() as f64 * fraction) as usize;
     let mut acc = 0;
-    for level in 0..256 {
-        acc += count(level);
+    for (level, &count) in hist.iter().enumerate() {
+        acc += count;
         if acc > target {
-            return (darkest as u8, level as u8);
+            return (darkest, level as u8);
         }
     }
-    (darkest as u8, 255)
+    (darkest, 255)
 }
 
 /// Scratch for the labelling.
