@@ -59,7 +59,14 @@ fn frames() -> Vec<(String, GrayImage)> {
 fn bench(c: &mut Criterion) {
     let config = Config::embedded();
     let camera = camera();
-    let mut detector = Detector::new(&config.detect, &camera, config.drogue.inner_radius_m);
+    let mut detector = Detector::new(
+        &config.detect,
+        &camera,
+        drogue_vision::measure::detect::canopy::DrogueCircles {
+            inner_radius_m: config.drogue.inner_radius_m,
+            canopy_radius_m: config.drogue.canopy_radius_m,
+        },
+    );
     for (name, image) in frames() {
         c.bench_function(&format!("detect full {name}"), |b| {
             b.iter(|| black_box(detector.detect(black_box(&image), None)))
@@ -73,5 +80,92 @@ fn bench(c: &mut Criterion) {
     }
 }
 
-criterion_group!(benches, bench);
+/// The reference sets whose frames the per-frame figures cover.
+const SETS: [&str; 9] = [
+    "paper10",
+    "range",
+    "tilt",
+    "occlusion",
+    "noise",
+    "hard",
+    "hard_b",
+    "hard_c",
+    "negative",
+];
+
+/// The full-frame search on every frame of every reference set, as the
+/// issue's targets state it (median and p99 per frame): each frame's time
+/// is the best of 7 runs (as `opencv_baseline.py` takes the best of 20), so
+/// the figures are the search's own cost, not the VM's hiccups. Printed per
+/// set and over all frames; criterion itself times each set as a whole.
+fn reference_sets(c: &mut Criterion) {
+    let Some(dir) = std::env::var_os("DROGUE_REFERENCE_DIR").map(PathBuf::from) else {
+        eprintln!("detect sets: DROGUE_REFERENCE_DIR is not set; per-frame figures not measured");
+        return;
+    };
+    let config = Config::embedded();
+    let mut all = Vec::new();
+    for set in SETS {
+        let folder = dir.join(set);
+        let Ok(camera) = CameraModel::load(&folder.join("camera.yaml")) else {
+            continue;
+        };
+        let mut detector = Detector::new(
+            &config.detect,
+            &camera,
+            drogue_vision::measure::detect::canopy::DrogueCircles {
+                inner_radius_m: config.drogue.inner_radius_m,
+                canopy_radius_m: config.drogue.canopy_radius_m,
+            },
+        );
+        let mut names: Vec<PathBuf> = std::fs::read_dir(&folder)
+            .into_iter()
+            .flatten()
+            .filter_map(|e| e.ok().map(|e| e.path()))
+            .filter(|p| p.extension().is_some_and(|x| x == "png"))
+            .collect();
+        names.sort();
+        let images: Vec<GrayImage> = names.iter().filter_map(|p| read_gray8(p).ok()).collect();
+        let mut times: Vec<f64> = images
+            .iter()
+            .map(|image| {
+                (0..7)
+                    .map(|_| {
+                        let t = std::time::Instant::now();
+                        black_box(detector.detect(black_box(image), None));
+                        t.elapsed().as_secs_f64() * 1e3
+                    })
+                    .fold(f64::INFINITY, f64::min)
+            })
+            .collect();
+        times.sort_by(f64::total_cmp);
+        if let (Some(median), Some(worst)) = (times.get(times.len() / 2), times.last()) {
+            println!(
+                "detect sets: {set}: {} frames, full-frame search median {median:.3} ms, max {worst:.3} ms",
+                times.len()
+            );
+        }
+        all.extend(times);
+        c.bench_function(&format!("detect full set {set}"), |b| {
+            b.iter(|| {
+                for image in &images {
+                    black_box(detector.detect(black_box(image), None));
+                }
+            })
+        });
+    }
+    all.sort_by(f64::total_cmp);
+    if !all.is_empty() {
+        let at = |q: f64| all[((q * all.len() as f64).ceil() as usize).clamp(1, all.len()) - 1];
+        println!(
+            "detect sets: all {} frames: median {:.3} ms, p99 {:.3} ms, max {:.3} ms",
+            all.len(),
+            at(0.5),
+            at(0.99),
+            at(1.0)
+        );
+    }
+}
+
+criterion_group!(benches, bench, reference_sets);
 criterion_main!(benches);

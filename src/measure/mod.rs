@@ -137,7 +137,14 @@ impl Measurer {
         }
         let mount = mount::Mount::from_config(&config.mount).map_err(MeasureSetupError::Mount)?;
         Ok(Self {
-            detector: detect::Detector::new(&config.detect, &camera, d.inner_radius_m),
+            detector: detect::Detector::new(
+                &config.detect,
+                &camera,
+                detect::canopy::DrogueCircles {
+                    inner_radius_m: d.inner_radius_m,
+                    canopy_radius_m: d.canopy_radius_m,
+                },
+            ),
             fitter: fit::Fitter::new(&config.fit),
             tracker: track::Tracker::new(&config.track).map_err(MeasureSetupError::Track)?,
             inner_radius_m: d.inner_radius_m,

@@ -8,25 +8,19 @@ use drogue_vision::measure::ellipse::Ellipse;
 use nalgebra::Vector3;
 use std::path::PathBuf;
 
-/// The reference frames' folder from `DROGUE_REFERENCE_DIR`: `None` (and a
-/// plain message) when the variable is not set; a failure when it is set and
-/// the folder is missing.
-pub fn reference_dir() -> Option<PathBuf> {
-    match std::env::var_os("DROGUE_REFERENCE_DIR") {
-        None => {
-            eprintln!("DROGUE_REFERENCE_DIR is not set: reference cross-check SKIPPED");
-            None
-        }
-        Some(d) => {
-            let d = PathBuf::from(d);
-            assert!(
-                d.is_dir(),
-                "DROGUE_REFERENCE_DIR={} is not a folder",
-                d.display()
-            );
-            Some(d)
-        }
-    }
+/// The reference frames' folder from `DROGUE_REFERENCE_DIR`. These tests are
+/// `#[ignore]`d; run on purpose, they fail loudly when the variable is unset
+/// or names a missing folder, so that they can never pass without running.
+pub fn reference_dir() -> PathBuf {
+    let d = std::env::var_os("DROGUE_REFERENCE_DIR")
+        .map(PathBuf::from)
+        .expect("DROGUE_REFERENCE_DIR is not set: it must name the reference frames' folder");
+    assert!(
+        d.join("paper10").is_dir(),
+        "DROGUE_REFERENCE_DIR={} is not the reference frames' folder (no paper10/ in it)",
+        d.display()
+    );
+    d
 }
 
 /// Truth of one frame, as the reference `truth.jsonl` and the simulator give it.

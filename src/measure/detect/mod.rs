@@ -13,8 +13,10 @@
 //! With a tracking hint only step 2's narrow pass runs, around the
 //! predicted ellipse; the full search follows only when that fails.
 
+pub mod canopy;
 mod coarse;
 pub mod conic_fit;
+mod edges;
 pub mod rim;
 #[cfg(test)]
 mod tests;
@@ -60,19 +62,21 @@ pub struct DetectConfig {
     pub min_rim_points: u32,
     /// Edge distance from the candidate's ellipse counted as "on the rim", pixels.
     pub inlier_tolerance_px: f64,
-    /// Radius range (multiples of the disc's) searched for the canopy's outer rim band.
-    pub canopy_band_ratio: [f64; 2],
-    /// Weight of the canopy band evidence in the score (0..1).
+    /// Weight of the canopy rim evidence in the score (0..1).
     pub canopy_weight: f64,
-    /// Disc radius (pixels) from which the canopy band must be seen: below it
-    /// the band is too thin to resolve.
+    /// Disc radius (pixels) from which the canopy rim must be seen where it
+    /// can be judged: below it the rim is too thin to resolve.
     pub canopy_required_from_px: f64,
-    /// Smallest share of rim rays showing the canopy band, when required.
+    /// Smallest share of the predicted canopy rim that shows its edge,
+    /// when required.
     pub min_canopy_fraction: f64,
     /// A candidate this good ends the search (the rest are not verified).
     pub accept_score: f64,
     /// Smallest score (0..1) for a detection.
     pub min_score: f64,
+    /// Smallest share of the ellipse's inside darker than the middle of
+    /// the rim's step (a crescent or a ring has light inside).
+    pub min_fill: f64,
     /// Seed of the random sampling (the detection is deterministic).
     pub seed: u64,
 }
@@ -96,6 +100,40 @@ pub struct RimCandidate {
 /// configured spacing.
 const SCOUT_SPACING_FACTOR: f64 = 3.0;
 
+/// Narrow-pass windows are widened by this factor while more than
+/// [`CLIPPED_SHARE`] of the steps run into their ends (blur), up to
+/// [`MAX_WIDEN`] times, and at most to [`MAX_WIDE_MARGIN_RADII`] of the
+/// radius and [`MAX_WIDE_MARGIN_PX`] pixels each way (32 px of motion blur
+/// is a 32 px ramp).
+const WIDEN_STEP: f64 = 2.5;
+const MAX_WIDEN: f64 = 6.25;
+const CLIPPED_SHARE: f64 = 0.25;
+const MAX_WIDE_MARGIN_RADII: f64 = 0.6;
+const MAX_WIDE_MARGIN_PX: f64 = 48.0;
+
+/// A rim step no wider than this share of the disc's minor radius (or
+/// [`SHARP_STEP_PX`]) is sharp; at least [`MIN_SHARP_SHARE`] of the rim's
+/// steps must be (linear motion blur leaves the steps across its direction
+/// sharp: a third of the rim and more).
+const SHARP_STEP_RADII: f64 = 0.2;
+const SHARP_STEP_PX: f64 = 4.0;
+const MIN_SHARP_SHARE: f64 = 0.15;
+
+/// Edges within this many of their robust scatter (and at least
+/// `inlier_tolerance_px`) of the ellipse are on the rim.
+const NOISE_TOLERANCE_SIGMAS: f64 = 3.0;
+
+/// Circles of the edge source verified per frame, strongest first.
+const EDGE_SEEDS: usize = 4;
+
+/// Rays and radius fractions of the fill test (inside the ellipse).
+const FILL_DIRECTIONS: usize = 24;
+const FILL_FRACTIONS: [f64; 5] = [0.1, 0.3, 0.5, 0.7, 0.85];
+
+/// Gray level from which a sample counts as saturated (glare): it says
+/// nothing about the surface under it.
+const SATURATED_GRAY: f32 = 250.0;
+
 /// Samples per seed radius on the rays of a seed's wide first pass.
 const WIDE_STEPS_PER_RADIUS: f64 = 40.0;
 
@@ -109,7 +147,7 @@ struct Seed {
     /// How far the first ray pass looks, in multiples of the seed's radius.
     reach: f64,
     /// Which point of its blob: 0 the centroid, 1 the deepest point, 2 the
-    /// point best ringed by light.
+    /// point best ringed by light; 3 a circle of the edge source.
     kind: u8,
 }
 
@@ -143,11 +181,16 @@ struct RimPass {
     undistorted: Vec<[f64; 2]>,
     residuals: Vec<f64>,
     inliers: Vec<usize>,
-    /// Direction and edge distance of each point's ray.
-    dirs: Vec<([f64; 2], f64)>,
+    /// Width of each point's step (twice its edge-to-light distance),
+    /// pixels: wide along a motion blur.
+    step_widths_px: Vec<f64>,
     rim_contrast: f64,
     /// Share of the rays in the image with their edge on the ellipse.
     shape: f64,
+    /// Share of the inside darker than the rim's mid level.
+    fill: f64,
+    /// Distance from the ellipse counted as on the rim, pixels.
+    tolerance: f64,
 }
 
 /// A verified candidate.
@@ -158,17 +201,52 @@ struct Verified {
     score: f64,
 }
 
+/// Why a candidate was not kept: shown by `RUST_LOG=debug` (the
+/// `drogue_vision::measure::detect` target), one line per candidate.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Reject {
+    /// Fewer rays than needed found an edge (wide pass or narrow pass).
+    FewEdges(usize),
+    /// Most of the narrow pass's rays leave the image.
+    OutOfImage,
+    /// No ellipse through the edges.
+    NoEllipse,
+    /// The ellipse's size or axis ratio is not the disc's at any allowed
+    /// range and tilt.
+    Implausible,
+    /// Too few edges on the ellipse.
+    FewInliers(usize),
+    /// The rim's median step is below `min_contrast_gray`.
+    LowContrast(f64),
+    /// Too little of the ellipse's inside is darker than the middle of
+    /// the rim's step (share of the inside samples that are).
+    LightInside(f64),
+    /// The canopy band is missing around a disc large enough to show it
+    /// (share of rays that show it).
+    NoCanopy(f64),
+    /// The evidence score is below `min_score`.
+    LowScore(f64),
+    /// Too few of the rim's steps are sharp (share that are): blurred
+    /// beyond what can be measured.
+    Blurred(f64),
+    /// The narrow passes did not settle.
+    Unsettled,
+}
+
 /// Finds the dark inner circle. Holds scratch buffers between frames.
 #[derive(Clone)]
 pub struct Detector {
     cfg: DetectConfig,
     camera: CameraModel,
+    /// The drogue's circles, for the canopy rim its pose predicts.
+    drogue: canopy::DrogueCircles,
     /// Disc radius limits in pixels, from the range limits.
     min_radius_px: f64,
     max_radius_px: f64,
     decimated: Decimated,
     finder: BlobFinder,
     blobs: Vec<Blob>,
+    voter: edges::EdgeVoter,
     profile: Vec<f32>,
 }
 
@@ -205,18 +283,21 @@ fn median(values: &mut [f64]) -> f64 {
 }
 
 impl Detector {
-    pub fn new(cfg: &DetectConfig, camera: &CameraModel, inner_radius_m: f64) -> Self {
+    pub fn new(cfg: &DetectConfig, camera: &CameraModel, drogue: canopy::DrogueCircles) -> Self {
+        let inner_radius_m = drogue.inner_radius_m;
         let f = camera.fx().max(camera.fy());
         let min_range = cfg.min_range_m.max(1e-3);
         let max_range = cfg.max_range_m.max(min_range);
         Self {
             cfg: cfg.clone(),
             camera: camera.clone(),
+            drogue,
             min_radius_px: f * inner_radius_m / max_range,
             max_radius_px: f * inner_radius_m / min_range,
             decimated: Decimated::default(),
             finder: BlobFinder::default(),
             blobs: Vec::new(),
+            voter: edges::EdgeVoter::default(),
             profile: Vec::new(),
         }
     }
@@ -228,15 +309,16 @@ impl Detector {
         if image.width() < 8 || image.height() < 8 {
             return None;
         }
-        if let Some(h) = hint.filter(|h| h.a.is_finite() && h.b > 0.5 && h.a < 1e5)
-            && let Some(v) = self.verify_settled(
+        if let Some(h) = hint.filter(|h| h.a.is_finite() && h.b > 0.5 && h.a < 1e5) {
+            match self.verify_settled(
                 image,
                 h,
                 self.cfg.rim_point_spacing_px,
                 self.cfg.tracked_max_rim_points,
-            )
-        {
-            return Some(v.into_candidate());
+            ) {
+                Ok(v) => return Some(v.into_candidate()),
+                Err(why) => tracing::debug!(?why, "not at the tracked ellipse: full search"),
+            }
         }
         self.search_full(image).map(Verified::into_candidate)
     }
@@ -347,7 +429,7 @@ impl Detector {
                     a_px: b.core_radius_px,
                     b_px: b.core_radius_px,
                     theta: 0.0,
-                    reach: 3.0,
+                    reach: 5.0,
                     kind: 1,
                 });
             }
@@ -362,7 +444,7 @@ impl Detector {
                     a_px: b.ringed_radius_px,
                     b_px: b.ringed_radius_px,
                     theta: 0.0,
-                    reach: 3.0,
+                    reach: 5.0,
                     kind: 2,
                 });
             }
@@ -382,7 +464,14 @@ impl Detector {
                 // The seed's random stream is fixed by its blob's place in
                 // the size order and its kind, not by the order of trying.
                 let r = self.verify_seed(image, seed, 3 * k as u64 + seed.kind as u64);
-                if let Some(v) = r
+                tracing::debug!(
+                    centre_px = ?[seed.centre_px[0].round(), seed.centre_px[1].round()],
+                    radius_px = seed.a_px.round(),
+                    kind = seed.kind,
+                    result = ?r.as_ref().map(|v| v.score),
+                    "candidate"
+                );
+                if let Ok(v) = r
                     && best.as_ref().is_none_or(|bv| v.score > bv.score)
                 {
                     best = Some(v);
@@ -395,20 +484,85 @@ impl Detector {
                 }
             }
         }
+        // The edge source, when the dark regions gave no clear drogue: a
+        // disc merged with the hose, probe or a glare streak, or washed out
+        // by haze, still has its rim.
+        if best
+            .as_ref()
+            .is_none_or(|v| v.score < self.cfg.accept_score)
+        {
+            let circles = self.voter.find(
+                &self.decimated,
+                self.cfg.min_contrast_gray,
+                self.min_radius_px,
+                self.max_radius_px,
+                EDGE_SEEDS,
+            );
+            for (i, c) in circles.iter().enumerate() {
+                let seed = Seed {
+                    centre_px: c.centre_px,
+                    a_px: c.radius_px,
+                    b_px: c.radius_px,
+                    theta: 0.0,
+                    reach: 1.8,
+                    kind: 3,
+                };
+                if tried.iter().any(|t| t.same_as(&seed)) {
+                    continue;
+                }
+                tried.push(seed.clone());
+                let r = self.verify_seed(image, &seed, 1000 + i as u64);
+                tracing::debug!(
+                    centre_px = ?[seed.centre_px[0].round(), seed.centre_px[1].round()],
+                    radius_px = seed.a_px.round(),
+                    strength = c.strength,
+                    result = ?r.as_ref().map(|v| v.score),
+                    "edge candidate"
+                );
+                if let Ok(v) = r
+                    && best.as_ref().is_none_or(|bv| v.score > bv.score)
+                {
+                    best = Some(v);
+                }
+                if best
+                    .as_ref()
+                    .is_some_and(|v| v.score >= self.cfg.accept_score)
+                {
+                    break;
+                }
+            }
+        }
+        tracing::debug!(
+            regions = regions,
+            seeds = tried.len(),
+            best = ?best.as_ref().map(|v| v.score),
+            "full-frame search"
+        );
         self.blobs = blobs;
         let scouted = best?;
         let spacing = self.cfg.rim_point_spacing_px;
         let max_points = self.cfg.max_rim_points;
-        Some(
-            self.verify_settled(image, &scouted.ellipse, spacing, max_points)
-                .unwrap_or(scouted),
-        )
+        match self.verify_settled(image, &scouted.ellipse, spacing, max_points) {
+            Ok(full) => Some(full),
+            Err(why) => {
+                tracing::debug!(
+                    ?why,
+                    "the full-density rim pass failed: the scout's rim is kept"
+                );
+                Some(scouted)
+            }
+        }
     }
 
     /// Verifies a coarse seed: a wide ray pass from its centre, a robust
     /// fit, then the narrow pass around that fit.
     #[inline(never)]
-    fn verify_seed(&mut self, image: &GrayImage, seed: &Seed, index: u64) -> Option<Verified> {
+    fn verify_seed(
+        &mut self,
+        image: &GrayImage,
+        seed: &Seed,
+        index: u64,
+    ) -> Result<Verified, Reject> {
         let rays = 48;
         let mut points = Vec::with_capacity(rays);
         let c = seed.centre_px;
@@ -435,7 +589,7 @@ impl Detector {
             }
         }
         if points.len() < 8 {
-            return None;
+            return Err(Reject::FewEdges(points.len()));
         }
         let scale = seed.b_px.max(1.0);
         let tolerance = (0.03 * scale).max(1.0);
@@ -452,11 +606,10 @@ impl Detector {
                     .count();
                 n as f64 >= 0.8 * points.len() as f64
             })
-            .or_else(|| {
-                conic_fit::ransac_ellipse(&points, tolerance, 300, self.cfg.seed ^ index)
-            })?;
+            .or_else(|| conic_fit::ransac_ellipse(&points, tolerance, 300, self.cfg.seed ^ index))
+            .ok_or(Reject::NoEllipse)?;
         if !self.plausible(&first, 0.5) {
-            return None;
+            return Err(Reject::Implausible);
         }
         // Candidates are compared on a sparser rim (cheaper); the winner
         // gets the full density.
@@ -487,7 +640,7 @@ impl Detector {
         start: &Ellipse,
         spacing_px: f64,
         max_points: u32,
-    ) -> Option<Verified> {
+    ) -> Result<Verified, Reject> {
         // The canopy evidence (a second ray pass) is looked at only on the
         // pass that is kept: a pass that moves the ellipse is followed by
         // another one.
@@ -499,7 +652,7 @@ impl Detector {
             }
             previous = pass.ellipse;
         }
-        None
+        Err(Reject::Unsettled)
     }
 
     /// The narrow ray pass around `start` and the robust refit, with the
@@ -510,7 +663,7 @@ impl Detector {
         start: &Ellipse,
         spacing_px: f64,
         max_points: u32,
-    ) -> Option<RimPass> {
+    ) -> Result<RimPass, Reject> {
         let centre = self.camera.distort_px([start.cx, start.cy]);
         let perimeter = TAU * ((start.a * start.a + start.b * start.b) / 2.0).sqrt();
         let rays =
@@ -519,87 +672,187 @@ impl Detector {
         let (w, h) = (f64::from(image.width()), f64::from(image.height()));
         let inside = |p: [f64; 2]| p[0] >= 0.0 && p[1] >= 0.0 && p[0] <= w - 1.0 && p[1] <= h - 1.0;
 
-        let mut points_px = Vec::with_capacity(rays);
-        let mut undistorted = Vec::with_capacity(rays);
-        let mut contrasts = Vec::with_capacity(rays);
-        let mut darks_all = Vec::with_capacity(rays);
-        let mut dirs = Vec::with_capacity(rays);
-        let mut rays_in_image = 0usize;
-        let (sin_theta, cos_theta) = start.theta.sin_cos();
-        for dir in ray_directions(rays) {
-            // The ray's angle to the major axis: phi - theta.
-            let (cos_local, sin_local) = (
-                dir[0] * cos_theta + dir[1] * sin_theta,
-                dir[1] * cos_theta - dir[0] * sin_theta,
+        // A blurred rim is a ramp as wide as the blur: where most steps run
+        // into the window's ends, their levels are not the disc's and the
+        // canopy's, and the window is widened (the mid-level crossing of a
+        // whole blurred step is the edge).
+        let mut widen = 1.0;
+        let (mut points_px, mut undistorted, mut contrasts, mut mid_levels, mut widths);
+        let mut rays_in_image;
+        loop {
+            points_px = Vec::with_capacity(rays);
+            undistorted = Vec::with_capacity(rays);
+            contrasts = Vec::with_capacity(rays);
+            mid_levels = Vec::with_capacity(rays);
+            widths = Vec::with_capacity(rays);
+            rays_in_image = 0usize;
+            let mut clipped = 0usize;
+            let (sin_theta, cos_theta) = start.theta.sin_cos();
+            for dir in ray_directions(rays) {
+                // The ray's angle to the major axis: phi - theta.
+                let (cos_local, sin_local) = (
+                    dir[0] * cos_theta + dir[1] * sin_theta,
+                    dir[1] * cos_theta - dir[0] * sin_theta,
+                );
+                let r = polar_radius_local(start.a, start.b, cos_local, sin_local);
+                let base = (self.cfg.rim_search_fraction * r)
+                    .clamp(4.0, self.cfg.rim_search_max_px.max(4.0));
+                let margin = if widen > 1.0 {
+                    (base * widen)
+                        .min(MAX_WIDE_MARGIN_RADII * r)
+                        .min(MAX_WIDE_MARGIN_PX)
+                        .max(base)
+                } else {
+                    base
+                };
+                let (s0, s1) = ((r - margin).max(0.5), r + margin);
+                let far = [centre[0] + s1 * dir[0], centre[1] + s1 * dir[1]];
+                let near = [centre[0] + s0 * dir[0], centre[1] + s0 * dir[1]];
+                if !(inside(far) && inside(near)) {
+                    continue;
+                }
+                rays_in_image += 1;
+                rim::profile(image, centre, dir, s0, s1, 0.5, &mut self.profile);
+                if let Some(e) = rim::strongest_rise(&self.profile, s0, 0.5, min_contrast) {
+                    let p = [centre[0] + e.s * dir[0], centre[1] + e.s * dir[1]];
+                    points_px.push(p);
+                    undistorted.push(self.camera.undistort_px(p));
+                    contrasts.push(f64::from(e.light - e.dark));
+                    mid_levels.push(0.5 * (e.dark + e.light));
+                    widths.push(2.0 * (e.light_s - e.s).max(0.0));
+                    clipped += usize::from(e.clipped);
+                }
+            }
+            tracing::trace!(
+                rays,
+                rays_in_image,
+                edges = points_px.len(),
+                clipped,
+                widen,
+                "rim pass"
             );
-            let r = polar_radius_local(start.a, start.b, cos_local, sin_local);
-            let margin =
-                (self.cfg.rim_search_fraction * r).clamp(4.0, self.cfg.rim_search_max_px.max(4.0));
-            let (s0, s1) = ((r - margin).max(0.5), r + margin);
-            let far = [centre[0] + s1 * dir[0], centre[1] + s1 * dir[1]];
-            let near = [centre[0] + s0 * dir[0], centre[1] + s0 * dir[1]];
-            if !(inside(far) && inside(near)) {
-                continue;
+            if widen >= MAX_WIDEN || (clipped as f64) <= CLIPPED_SHARE * points_px.len() as f64 {
+                break;
             }
-            rays_in_image += 1;
-            rim::profile(image, centre, dir, s0, s1, 0.5, &mut self.profile);
-            if let Some(e) = rim::strongest_rise(&self.profile, s0, 0.5, min_contrast) {
-                let p = [centre[0] + e.s * dir[0], centre[1] + e.s * dir[1]];
-                points_px.push(p);
-                undistorted.push(self.camera.undistort_px(p));
-                contrasts.push(f64::from(e.light - e.dark));
-                darks_all.push(f64::from(e.dark));
-                dirs.push((dir, e.s));
-            }
+            widen *= WIDEN_STEP;
         }
-        if rays_in_image < rays / 4 || undistorted.len() < self.cfg.min_rim_points as usize {
-            return None;
+        if rays_in_image < rays / 4 {
+            return Err(Reject::OutOfImage);
         }
-        let tol = self.cfg.inlier_tolerance_px.max(0.1);
-        let coarse_tol = (0.05 * start.b).max(3.0 * tol);
-        let ellipse = conic_fit::refine(start, &undistorted, coarse_tol, 2)
-            .and_then(|e| conic_fit::refine(&e, &undistorted, tol, 2))?;
-        if !self.plausible(&ellipse, 1.0) {
-            return None;
+        if undistorted.len() < self.cfg.min_rim_points as usize {
+            return Err(Reject::FewEdges(undistorted.len()));
         }
+        let min_tol = self.cfg.inlier_tolerance_px.max(0.1);
+        let coarse_tol = (0.05 * start.b).max(3.0 * min_tol);
+        let coarse =
+            conic_fit::refine(start, &undistorted, coarse_tol, 2).ok_or(Reject::NoEllipse)?;
+        // The edges' own scatter sets what is "on the rim": a blurred rim in
+        // noise is located to a pixel or two (noise over the ramp's slope),
+        // a sharp one to a tenth.
         let mut residuals = Vec::new();
+        conic_fit::residuals(&coarse, &undistorted, &mut residuals);
+        let mut near: Vec<f64> = residuals
+            .iter()
+            .copied()
+            .filter(|r| *r <= coarse_tol)
+            .collect();
+        let sigma = 1.4826 * median(&mut near);
+        let tol = (NOISE_TOLERANCE_SIGMAS * sigma).clamp(min_tol, (0.5 * coarse_tol).max(min_tol));
+        let ellipse = conic_fit::refine(&coarse, &undistorted, tol, 2).ok_or(Reject::NoEllipse)?;
+        if !self.plausible(&ellipse, 1.0) {
+            return Err(Reject::Implausible);
+        }
         conic_fit::residuals(&ellipse, &undistorted, &mut residuals);
         let inliers: Vec<usize> = (0..residuals.len())
             .filter(|&i| residuals[i] <= tol)
             .collect();
         if inliers.len() < self.cfg.min_rim_points as usize {
-            return None;
+            return Err(Reject::FewInliers(inliers.len()));
         }
         let mut inlier_contrast: Vec<f64> = inliers.iter().map(|&i| contrasts[i]).collect();
         let rim_contrast = median(&mut inlier_contrast);
         if rim_contrast < self.cfg.min_contrast_gray {
-            return None;
+            return Err(Reject::LowContrast(rim_contrast));
         }
-        // Dark inside: one dark surface (shaded, but far less than the
-        // rim's step), not a patchwork that happens to have edges on an ellipse.
-        let mut darks: Vec<f64> = inliers.iter().map(|&i| darks_all[i]).collect();
-        darks.sort_by(f64::total_cmp);
-        let (q1, q3) = (darks[darks.len() / 4], darks[3 * darks.len() / 4]);
-        if q3 - q1 > 0.25 * rim_contrast {
-            return None;
+        // Dark inside: the disc fills its ellipse. A crescent (whose outer
+        // arc is a fine circle), a ring, or the canopy's outer rim taken for
+        // the disc's have light inside the ellipse their edges fit.
+        let mids: Vec<(f64, f32)> = inliers
+            .iter()
+            .map(|&i| {
+                let p = undistorted[i];
+                let angle = (p[1] - ellipse.cy).atan2(p[0] - ellipse.cx);
+                (angle, mid_levels[i])
+            })
+            .collect();
+        let fill = self.fill_share(image, &ellipse, &mids);
+        if fill < self.cfg.min_fill {
+            return Err(Reject::LightInside(fill));
         }
         let shape = inliers.len() as f64 / rays_in_image as f64;
-        Some(RimPass {
+        Ok(RimPass {
             ellipse,
             centre,
             points_px,
             undistorted,
             residuals,
             inliers,
-            dirs,
+            step_widths_px: widths,
             rim_contrast,
             shape,
+            fill,
+            tolerance: tol,
         })
+    }
+
+    /// Share of samples inside `ellipse` (undistorted pixels) darker than
+    /// the middle of the rim's step. Samples lie on [`FILL_DIRECTIONS`] rays
+    /// at [`FILL_FRACTIONS`] of the ellipse's radius; each is compared with
+    /// the mid level of the rim edge nearest in angle (`mids`: angle about
+    /// the ellipse's centre, mid level), so that a glare veil or vignetting
+    /// across the disc does not count as light. Saturated samples (glare)
+    /// count neither way. 1 when nothing could be sampled.
+    fn fill_share(&self, image: &GrayImage, ellipse: &Ellipse, mids: &[(f64, f32)]) -> f64 {
+        if mids.is_empty() {
+            return 1.0;
+        }
+        let (mut dark, mut counted) = (0usize, 0usize);
+        for k in 0..FILL_DIRECTIONS {
+            let phi = TAU * (k as f64 + 0.5) / FILL_DIRECTIONS as f64;
+            let r = polar_radius(ellipse.a, ellipse.b, ellipse.theta, phi);
+            let gap = |a: f64| {
+                let d = (a - phi).rem_euclid(TAU);
+                d.min(TAU - d)
+            };
+            let Some(&(_, mid)) = mids.iter().min_by(|x, y| gap(x.0).total_cmp(&gap(y.0))) else {
+                continue;
+            };
+            let (sin, cos) = phi.sin_cos();
+            for f in FILL_FRACTIONS {
+                let q = [ellipse.cx + f * r * cos, ellipse.cy + f * r * sin];
+                let [u, v] = self.camera.distort_px(q);
+                let Some(value) = rim::sample(image, u, v) else {
+                    continue;
+                };
+                if value >= SATURATED_GRAY {
+                    continue;
+                }
+                counted += 1;
+                if value < mid {
+                    dark += 1;
+                }
+            }
+        }
+        if counted == 0 {
+            1.0
+        } else {
+            dark as f64 / counted as f64
+        }
     }
 
     /// The evidence score of a rim pass (the canopy's outer rim band beyond
     /// its inlier edges), and the candidate when it is good enough.
-    fn score(&mut self, image: &GrayImage, pass: RimPass) -> Option<Verified> {
+    fn score(&mut self, image: &GrayImage, pass: RimPass) -> Result<Verified, Reject> {
         let RimPass {
             ellipse,
             centre,
@@ -607,48 +860,64 @@ impl Detector {
             undistorted,
             residuals,
             inliers,
-            dirs,
+            step_widths_px,
             rim_contrast,
             shape,
+            fill,
+            tolerance: tol,
         } = pass;
-        let tol = self.cfg.inlier_tolerance_px.max(0.1);
-        let (w, h) = (f64::from(image.width()), f64::from(image.height()));
-        let inside = |p: [f64; 2]| p[0] >= 0.0 && p[1] >= 0.0 && p[0] <= w - 1.0 && p[1] <= h - 1.0;
-        // Canopy evidence: the outer rim band beyond the inlier edges.
-        let [lo_ratio, hi_ratio] = self.cfg.canopy_band_ratio;
-        let stride = (inliers.len() / 48).max(1);
-        let (mut looked, mut seen) = (0usize, 0usize);
-        for &i in inliers.iter().step_by(stride) {
-            let (dir, s) = dirs[i];
-            let (s0, s1) = (lo_ratio * s, hi_ratio * s);
-            let far = [centre[0] + s1 * dir[0], centre[1] + s1 * dir[1]];
-            if !inside(far) {
-                continue;
-            }
-            let step = (s / 30.0).clamp(0.5, 4.0);
-            rim::profile(image, centre, dir, s0, s1, step, &mut self.profile);
-            looked += 1;
-            let max_width = ((0.35 * s / step).ceil() as usize).max(2);
-            let min_dip = (0.15 * rim_contrast).max(0.5 * self.cfg.min_contrast_gray) as f32;
-            if rim::has_outer_band(&self.profile, min_dip, max_width) {
-                seen += 1;
-            }
+        // Canopy evidence: its outer rim where the candidate's pose puts it.
+        let widths: Vec<(f64, f64)> = inliers
+            .iter()
+            .map(|&i| {
+                let [u, v] = points_px[i];
+                let angle = (v - centre[1]).atan2(u - centre[0]);
+                (angle, step_widths_px[i])
+            })
+            .collect();
+        // Motion blur smears the rim along one direction only: across it
+        // the steps stay sharp. A rim soft all round is a blob out of
+        // focus, or a blur too long to measure.
+        let sharp_width = (SHARP_STEP_RADII * ellipse.b).max(SHARP_STEP_PX);
+        let sharp = widths.iter().filter(|w| w.1 <= sharp_width).count();
+        if (sharp as f64) < MIN_SHARP_SHARE * widths.len() as f64 {
+            return Err(Reject::Blurred(sharp as f64 / widths.len().max(1) as f64));
         }
-        let canopy = if looked > 0 {
-            seen as f64 / looked as f64
-        } else {
-            0.0
+        let edge = canopy::RimEdge {
+            min_step_gray: (0.1 * rim_contrast).max(0.5 * self.cfg.min_contrast_gray) as f32,
+            widths: &widths,
         };
-        if looked >= 8
+        let canopy = canopy::ring_support(
+            image,
+            &self.camera,
+            &ellipse,
+            self.drogue,
+            edge,
+            &mut self.profile,
+        );
+        if let Some(seen) = canopy
             && ellipse.a >= self.cfg.canopy_required_from_px
-            && canopy < self.cfg.min_canopy_fraction
+            && seen < self.cfg.min_canopy_fraction
         {
-            return None;
+            return Err(Reject::NoCanopy(seen));
         }
+        tracing::debug!(
+            centre_px = ?[ellipse.cx.round(), ellipse.cy.round()],
+            axes_px = ?[ellipse.a.round(), ellipse.b.round()],
+            shape,
+            fill,
+            canopy = ?canopy,
+            rim_contrast,
+            points = points_px.len(),
+            on_rim = inliers.len(),
+            tolerance_px = tol,
+            "evidence"
+        );
+        let canopy = canopy.unwrap_or(0.0);
         let w = self.cfg.canopy_weight.clamp(0.0, 1.0);
         let score = (shape * ((1.0 - w) + w * canopy)).clamp(0.0, 1.0);
         if score < self.cfg.min_score {
-            return None;
+            return Err(Reject::LowScore(score));
         }
         // Keep the points near the ellipse: the probe and hose outlines are
         // the fit's outliers, and fewer of them is better.
@@ -661,7 +930,7 @@ impl Detector {
                 .map(|(p, _)| p)
                 .collect()
         };
-        Some(Verified {
+        Ok(Verified {
             ellipse,
             points_px: near(points_px),
             undistorted: near(undistorted),

@@ -43,6 +43,13 @@ pub struct RayEdge {
     /// Local levels inside and outside the edge, gray levels.
     pub dark: f32,
     pub light: f32,
+    /// Distance from the ray's origin where the light level begins (the
+    /// step's outer end), pixels.
+    pub light_s: f64,
+    /// The step runs into the profile's first or last samples: its levels
+    /// are not those of the surfaces on either side (a blurred edge wider
+    /// than the profile).
+    pub clipped: bool,
 }
 
 /// Samples the profile along a ray from `origin` in direction `dir` (unit),
@@ -243,35 +250,9 @@ pub fn strongest_rise(p: &[f32], s_min: f64, step: f64, min_contrast: f32) -> Op
         s: s_min + (j as f64 + t) * step,
         dark,
         light,
+        light_s: s_min + light_start as f64 * step,
+        clipped: kl <= 1 || kr + 2 >= n,
     })
-}
-
-/// Whether the profile beyond the rim shows the canopy's darker outer rim
-/// band: a dip below the light levels on both of its sides by at least
-/// `min_dip` gray levels. `p` is sampled from the inner end of the canopy
-/// outward; `max_width` (samples) bounds the dip's width so that the edge
-/// of a wide dark cloud is not taken for a band.
-pub fn has_outer_band(p: &[f32], min_dip: f32, max_width: usize) -> bool {
-    let n = p.len();
-    if n < 5 {
-        return false;
-    }
-    let (k_min, v_min) =
-        p.iter().enumerate().fold(
-            (0, f32::MAX),
-            |(kb, vb), (k, &v)| if v < vb { (k, v) } else { (kb, vb) },
-        );
-    if k_min == 0 || k_min + 1 >= n {
-        return false;
-    }
-    let left_lo = k_min.saturating_sub(max_width);
-    let right_hi = (k_min + max_width).min(n - 1);
-    let left = p[left_lo..k_min].iter().copied().fold(f32::MIN, f32::max);
-    let right = p[k_min + 1..=right_hi]
-        .iter()
-        .copied()
-        .fold(f32::MIN, f32::max);
-    left.min(right) - v_min >= min_dip
 }
 
 #[cfg(test)]
@@ -298,15 +279,6 @@ mod tests {
     fn flat_profile_has_no_edge() {
         let p = vec![100.0f32; 40];
         assert!(strongest_rise(&p, 0.0, 0.5, 10.0).is_none());
-    }
-
-    #[test]
-    fn band_is_found_and_a_cloud_edge_is_not() {
-        let mut band = vec![180.0f32; 40];
-        band[20..23].iter_mut().for_each(|v| *v = 90.0);
-        assert!(has_outer_band(&band, 30.0, 8));
-        let edge: Vec<f32> = (0..40).map(|k| if k < 20 { 180.0 } else { 90.0 }).collect();
-        assert!(!has_outer_band(&edge, 30.0, 8));
     }
 
     #[test]

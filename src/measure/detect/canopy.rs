@@ -1,0 +1,281 @@
+//! Verification by the drogue's structure: the canopy's outer rim where the
+//! candidate's pose puts it.
+//!
+//! The dark disc (radius r) lies inside the lighter canopy, whose outer rim
+//! is a concentric circle of radius R in the same plane. A candidate ellipse
+//! fits two poses (the single-circle ambiguity); each predicts where the
+//! canopy's rim must appear. A true drogue shows an edge there (the rim's
+//! darker band against the sky, brightening outward) on most of it; an
+//! ellipse inside the disc (shading, the disc's lit half), the canopy's own
+//! rim taken for the disc, a crescent, a ring or a dark cloud predicts a rim
+//! where there is none. Saturated pixels (glare) and points outside the
+//! image are not judged, so glare and the frame border do not count against
+//! a candidate.
+//!
+//! This is looser than the ambiguity module's test (which tells the two
+//! poses apart to a fraction of a pixel): it asks only whether the canopy is
+//! there, so it searches a band a tenth of the rim's radius wide on either
+//! side, enough for a blurred rim and the fit's error scaled by R/r.
+
+use super::rim;
+use crate::camera::CameraModel;
+use crate::measure::ellipse::Ellipse;
+use crate::measure::pose::{CirclePose, cone_pose};
+use image::GrayImage;
+use nalgebra::Vector3;
+
+/// Points along the predicted rim (every 7.5 degrees of the circle).
+const SAMPLES: usize = 48;
+/// Half-width of the search across the predicted rim: this share of its
+/// radius in pixels, at least [`MIN_SEARCH_PX`].
+const SEARCH_RADII: f64 = 0.1;
+const MIN_SEARCH_PX: f64 = 3.0;
+/// How close to the predicted rim the strongest edge of the band must be:
+/// this share of its radius in pixels, at least [`MIN_TOLERANCE_PX`]. The
+/// rim of the right pose is predicted to about a pixel (the fit's error
+/// scaled by R/r), but a real canopy is a shallow cone, not quite in the
+/// disc's plane; the edges of unrelated dark shapes fall anywhere.
+const TOLERANCE_RADII: f64 = 0.05;
+const MIN_TOLERANCE_PX: f64 = 1.5;
+/// Rim points where the disc's step is wider than this share of the canopy
+/// rim's radius are not judged (the rim's band, a few percent of its
+/// radius, is smeared out there).
+const MAX_JUDGED_WIDTH_RADII: f64 = 0.15;
+/// Sampling step across the rim, pixels.
+const STEP_PX: f64 = 0.5;
+/// Gray level from which a sample counts as saturated.
+const SATURATED_GRAY: f32 = 250.0;
+/// Fewest rim points in the image (and not saturated) for a pose's rim to
+/// be judged.
+const MIN_JUDGED: usize = 12;
+
+/// The drogue's two circles, metres.
+#[derive(Clone, Copy, Debug)]
+pub struct DrogueCircles {
+    /// The dark inner circle's radius.
+    pub inner_radius_m: f64,
+    /// The canopy's outer rim's radius.
+    pub canopy_radius_m: f64,
+}
+
+/// What counts as the canopy's rim edge.
+#[derive(Clone, Copy, Debug)]
+pub struct RimEdge<'a> {
+    /// Smallest outward brightening, gray levels.
+    pub min_step_gray: f32,
+    /// Width of the disc's own rim step by direction: (image angle about
+    /// the ellipse's centre, radians; width, pixels), sorted by angle.
+    /// Motion blur widens both rims alike along its direction: there the
+    /// brightening is taken over that width (2 px at least) and its place
+    /// is known to a quarter of it; where the disc's step is wider than
+    /// [`MAX_JUDGED_WIDTH_RADII`] of the canopy rim's radius the thin rim
+    /// is smeared out and not judged.
+    pub widths: &'a [(f64, f64)],
+}
+
+impl RimEdge<'_> {
+    /// The disc's step width nearest to image angle `angle`, pixels.
+    fn width_at(&self, angle: f64) -> f64 {
+        let gap = |a: f64| {
+            let d = (a - angle).rem_euclid(std::f64::consts::TAU);
+            d.min(std::f64::consts::TAU - d)
+        };
+        self.widths
+            .iter()
+            .min_by(|x, y| gap(x.0).total_cmp(&gap(y.0)))
+            .map_or(2.0, |w| w.1)
+    }
+}
+
+/// The canopy evidence of a candidate: the larger of its two poses'
+/// shares of judged rim points with an outward brightening of at least
+/// `edge.min_step_gray` near the predicted rim. `None` when neither pose can
+/// be judged (degenerate ellipse, fewer than [`MIN_JUDGED`] points in the
+/// image).
+pub fn ring_support(
+    image: &GrayImage,
+    camera: &CameraModel,
+    ellipse: &Ellipse,
+    drogue: DrogueCircles,
+    edge: RimEdge,
+    profile: &mut Vec<f32>,
+) -> Option<f64> {
+    let poses = cone_pose(ellipse, camera, drogue.inner_radius_m)?;
+    poses
+        .iter()
+        .filter_map(|pose| {
+            let (judged, seen) =
+                pose_ring(image, camera, pose, drogue.canopy_radius_m, edge, profile);
+            (judged >= MIN_JUDGED).then(|| seen as f64 / judged as f64)
+        })
+        .max_by(f64::total_cmp)
+}
+
+/// (judged, with an edge) along the canopy rim that `pose` predicts.
+fn pose_ring(
+    image: &GrayImage,
+    camera: &CameraModel,
+    pose: &CirclePose,
+    canopy_radius_m: f64,
+    edge: RimEdge,
+    profile: &mut Vec<f32>,
+) -> (usize, usize) {
+    let n = pose.normal_camera;
+    if !(n.iter().all(|x| x.is_finite()) && n.norm() > 0.5) {
+        return (0, 0);
+    }
+    let n = n.normalize();
+    let helper = if n.x.abs() < 0.9 {
+        Vector3::x()
+    } else {
+        Vector3::y()
+    };
+    let e1 = n.cross(&helper).normalize();
+    let e2 = n.cross(&e1);
+    // The rim's radius in pixels, for the width of the search.
+    let Some(centre) = camera.project_px(&pose.centre_camera_m) else {
+        return (0, 0);
+    };
+    let (mut judged, mut seen) = (0, 0);
+    for k in 0..SAMPLES {
+        let t = std::f64::consts::TAU * k as f64 / SAMPLES as f64;
+        let radial = t.cos() * e1 + t.sin() * e2;
+        let Some((p, d)) = camera.project_px_with_derivative(
+            &(pose.centre_camera_m + canopy_radius_m * radial),
+            &radial,
+        ) else {
+            continue;
+        };
+        let len = d[0].hypot(d[1]);
+        if !(len > 0.0 && len.is_finite()) {
+            continue;
+        }
+        let out = [d[0] / len, d[1] / len];
+        let radius_px = (p[0] - centre[0]).hypot(p[1] - centre[1]);
+        let width = edge
+            .width_at((p[1] - centre[1]).atan2(p[0] - centre[0]))
+            .max(2.0);
+        if width > MAX_JUDGED_WIDTH_RADII * radius_px {
+            continue;
+        }
+        let search = (SEARCH_RADII * radius_px).max(MIN_SEARCH_PX);
+        // Half the difference's width more on each side.
+        let half = 0.5 * width;
+        rim::profile(
+            image,
+            p,
+            out,
+            -search - half,
+            search + half,
+            STEP_PX,
+            profile,
+        );
+        let expected = ((2.0 * (search + half)) / STEP_PX).floor() as usize + 1;
+        if profile.len() < expected || profile.iter().any(|&v| v >= SATURATED_GRAY) {
+            continue;
+        }
+        judged += 1;
+        let lag = (width / STEP_PX).round() as usize;
+        // The strongest 2 px rise and where its middle lies (offset from
+        // the predicted rim, pixels).
+        let Some((at, strongest)) = profile
+            .windows(lag + 1)
+            .map(|w| w[lag] - w[0])
+            .enumerate()
+            .max_by(|a, b| a.1.total_cmp(&b.1))
+        else {
+            continue;
+        };
+        let offset = -search - half + (at as f64 + 0.5 * lag as f64) * STEP_PX;
+        let tolerance = (TOLERANCE_RADII * radius_px)
+            .max(MIN_TOLERANCE_PX)
+            .max(0.25 * width);
+        if strongest >= edge.min_step_gray && offset.abs() <= tolerance {
+            seen += 1;
+        }
+    }
+    (judged, seen)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use image::Luma;
+    use nalgebra::Matrix3;
+
+    fn camera() -> CameraModel {
+        let k = Matrix3::new(800.0, 0.0, 320.0, 0.0, 800.0, 240.0, 0.0, 0.0, 1.0);
+        CameraModel::new("t", 640, 480, k, [0.0; 5]).unwrap()
+    }
+
+    /// A drogue seen face on at 2 m: disc (r 0.15 m, 60 px), canopy to
+    /// 0.30 m, a dark rim band to 0.33 m, sky; or the disc alone.
+    fn render(with_canopy: bool) -> GrayImage {
+        GrayImage::from_fn(640, 480, |x, y| {
+            let r_px = (f64::from(x) - 320.0).hypot(f64::from(y) - 240.0);
+            let r = r_px * 2.0 / 800.0;
+            let g = if r < 0.15 {
+                30
+            } else if !with_canopy {
+                170
+            } else if r < 0.30 {
+                150
+            } else if r < 0.33 {
+                70
+            } else {
+                170
+            };
+            Luma([g])
+        })
+    }
+
+    const DROGUE: DrogueCircles = DrogueCircles {
+        inner_radius_m: 0.15,
+        canopy_radius_m: 0.33,
+    };
+
+    const EDGE: RimEdge = RimEdge {
+        min_step_gray: 20.0,
+        widths: &[(0.0, 2.0)],
+    };
+
+    fn disc() -> Ellipse {
+        Ellipse {
+            cx: 320.0,
+            cy: 240.0,
+            a: 60.0,
+            b: 60.0,
+            theta: 0.0,
+        }
+    }
+
+    #[test]
+    fn a_drogue_shows_its_canopy_rim() {
+        let mut profile = Vec::new();
+        let s = ring_support(
+            &render(true),
+            &camera(),
+            &disc(),
+            DROGUE,
+            EDGE,
+            &mut profile,
+        );
+        assert!(s.is_some_and(|s| s > 0.9), "{s:?}");
+    }
+
+    #[test]
+    fn a_disc_without_canopy_and_a_wrong_size_show_none() {
+        let mut profile = Vec::new();
+        let cam = camera();
+        let bare = ring_support(&render(false), &cam, &disc(), DROGUE, EDGE, &mut profile);
+        assert!(bare.is_some_and(|s| s < 0.1), "{bare:?}");
+        // An ellipse inside the disc predicts a rim inside the canopy.
+        let inner = Ellipse {
+            a: 35.0,
+            b: 35.0,
+            ..disc()
+        };
+        let s = ring_support(&render(true), &cam, &inner, DROGUE, EDGE, &mut profile);
+        assert!(s.is_some_and(|s| s < 0.1), "{s:?}");
+    }
+}

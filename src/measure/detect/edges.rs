@@ -1,0 +1,258 @@
+//! The second, independent candidate source: dark round shapes from their
+//! edges, by Hough gradient voting (as OpenCV's `HOUGH_GRADIENT`, with the
+//! edge's polarity).
+//!
+//! The coarse search needs the disc to stand out as a dark region at one of
+//! a few global levels. Haze, glare and vignetting move the levels, and the
+//! hose, the probe or a glare streak merge the disc with other regions or
+//! split it. Its rim still has a dark-to-light edge all round: each edge
+//! pixel of the decimated frame votes for the centres that lie against its
+//! gradient (toward the dark side) at the distances a disc may have. A disc
+//! gathers the votes of its whole rim at its centre, even with part of the
+//! rim hidden; straight edges (hose, probe, cloud banks) spread theirs along
+//! a line. Each peak's radius is the commonest distance of the edges that
+//! voted for it. The verification decides, as for the coarse candidates.
+
+use super::coarse::Decimated;
+
+/// Smallest gradient that makes an edge pixel, gray levels per pixel of the
+/// decimated frame, as a share of the detector's smallest rim contrast.
+const MIN_GRADIENT_SHARE: f64 = 0.5;
+/// Most votes an edge casts (decimated pixels along its gradient): discs
+/// larger than this many decimated pixels are the coarse search's (they
+/// are the near range, where the disc dominates the frame).
+const MAX_VOTE_RADIUS: usize = 64;
+/// Peaks closer than this (decimated pixels) are one peak.
+const PEAK_SEPARATION: i64 = 4;
+/// A peak needs votes from at least this share of its rim's circumference
+/// (decimated pixels).
+const MIN_RIM_SHARE: f64 = 0.35;
+/// Edge pixels that voted for a peak lie within this angle of pointing
+/// away from it (cosine), and their distances are binned by this many
+/// decimated pixels.
+const RADIAL_COS: f64 = 0.9;
+
+/// A dark round shape found from its edges: centre and radius in
+/// full-resolution pixels, and its votes per rim pixel.
+#[derive(Clone, Debug)]
+pub struct EdgeCircle {
+    pub centre_px: [f64; 2],
+    pub radius_px: f64,
+    pub strength: f64,
+}
+
+/// Scratch for the voting, reused between frames.
+#[derive(Clone, Default)]
+pub struct EdgeVoter {
+    /// Edge pixels: position and unit gradient (toward the light side).
+    edges: Vec<([i32; 2], [f32; 2])>,
+    votes: Vec<u16>,
+    histogram: Vec<u32>,
+}
+
+impl EdgeVoter {
+    /// Up to `max_peaks` dark round shapes of radius `min_radius_px` to
+    /// `max_radius_px` (full-resolution pixels), strongest first.
+    pub fn find(
+        &mut self,
+        img: &Decimated,
+        min_contrast_gray: f64,
+        min_radius_px: f64,
+        max_radius_px: f64,
+        max_peaks: usize,
+    ) -> Vec<EdgeCircle> {
+        let (w, h) = (img.width, img.height);
+        if w < 3 || h < 3 || max_peaks == 0 {
+            return Vec::new();
+        }
+        let f = img.factor.max(1) as f64;
+        let r_min = ((min_radius_px / f).floor() as usize).max(1);
+        let r_max = ((max_radius_px / f).ceil() as usize).clamp(r_min, MAX_VOTE_RADIUS);
+        self.collect_edges(img, MIN_GRADIENT_SHARE * min_contrast_gray);
+        self.vote(w, h, r_min, r_max);
+        let peaks = self.peaks(w, h, r_min, max_peaks);
+        peaks
+            .into_iter()
+            .filter_map(|(x, y, votes)| {
+                let r = self.radius_at([x, y], r_min, r_max)?;
+                let circumference = std::f64::consts::TAU * r;
+                let strength = f64::from(votes) / circumference;
+                (strength >= MIN_RIM_SHARE).then(|| EdgeCircle {
+                    centre_px: img.to_full(x as f64, y as f64),
+                    radius_px: r * f,
+                    strength,
+                })
+            })
+            .collect()
+    }
+
+    /// Edge pixels: Sobel gradient (gray levels per pixel) of at least
+    /// `min_gradient`, with its direction.
+    fn collect_edges(&mut self, img: &Decimated, min_gradient: f64) {
+        let (w, h) = (img.width, img.height);
+        let p = |x: usize, y: usize| i32::from(img.pixels[y * w + x]);
+        let min2 = (min_gradient * 8.0).powi(2);
+        self.edges.clear();
+        for y in 1..h - 1 {
+            for x in 1..w - 1 {
+                let gx = p(x + 1, y - 1) + 2 * p(x + 1, y) + p(x + 1, y + 1)
+                    - p(x - 1, y - 1)
+                    - 2 * p(x - 1, y)
+                    - p(x - 1, y + 1);
+                let gy = p(x - 1, y + 1) + 2 * p(x, y + 1) + p(x + 1, y + 1)
+                    - p(x - 1, y - 1)
+                    - 2 * p(x, y - 1)
+                    - p(x + 1, y - 1);
+                let m2 = f64::from(gx * gx + gy * gy);
+                if m2 >= min2 {
+                    let m = m2.sqrt();
+                    self.edges.push((
+                        [x as i32, y as i32],
+                        [(f64::from(gx) / m) as f32, (f64::from(gy) / m) as f32],
+                    ));
+                }
+            }
+        }
+    }
+
+    /// Each edge votes for the centres r_min..=r_max pixels against its
+    /// gradient.
+    fn vote(&mut self, w: usize, h: usize, r_min: usize, r_max: usize) {
+        self.votes.clear();
+        self.votes.resize(w * h, 0);
+        for &([x, y], [gx, gy]) in &self.edges {
+            for r in r_min..=r_max {
+                let cx = (x as f32 - gx * r as f32).round() as i64;
+                let cy = (y as f32 - gy * r as f32).round() as i64;
+                if cx < 0 || cy < 0 || cx >= w as i64 || cy >= h as i64 {
+                    break;
+                }
+                let v = &mut self.votes[cy as usize * w + cx as usize];
+                *v = v.saturating_add(1);
+            }
+        }
+    }
+
+    /// The strongest local maxima of the votes (summed over 3x3), at least
+    /// [`PEAK_SEPARATION`] apart: (x, y, votes).
+    fn peaks(
+        &self,
+        w: usize,
+        h: usize,
+        r_min: usize,
+        max_peaks: usize,
+    ) -> Vec<(usize, usize, u32)> {
+        let sum3 = |x: usize, y: usize| -> u32 {
+            let mut s = 0u32;
+            for yy in y - 1..=y + 1 {
+                for xx in x - 1..=x + 1 {
+                    s += u32::from(self.votes[yy * w + xx]);
+                }
+            }
+            s
+        };
+        // The weakest peak worth a look: a fraction of the smallest rim.
+        let floor = (MIN_RIM_SHARE * std::f64::consts::TAU * r_min as f64).ceil() as u32;
+        let mut found: Vec<(usize, usize, u32)> = Vec::new();
+        for y in 1..h - 1 {
+            for x in 1..w - 1 {
+                if self.votes[y * w + x] == 0 {
+                    continue;
+                }
+                let s = sum3(x, y);
+                if s < floor {
+                    continue;
+                }
+                found.push((x, y, s));
+            }
+        }
+        found.sort_by_key(|p| std::cmp::Reverse(p.2));
+        let mut kept: Vec<(usize, usize, u32)> = Vec::with_capacity(max_peaks);
+        for p in found {
+            let near = kept.iter().any(|k| {
+                (k.0 as i64 - p.0 as i64).abs() <= PEAK_SEPARATION
+                    && (k.1 as i64 - p.1 as i64).abs() <= PEAK_SEPARATION
+            });
+            if !near {
+                kept.push(p);
+                if kept.len() == max_peaks {
+                    break;
+                }
+            }
+        }
+        kept
+    }
+
+    /// The commonest distance (decimated pixels) from `c` of the edges
+    /// whose gradient points away from it, within r_min..=r_max.
+    fn radius_at(&mut self, c: [usize; 2], r_min: usize, r_max: usize) -> Option<f64> {
+        self.histogram.clear();
+        self.histogram.resize(r_max + 2, 0);
+        let (cx, cy) = (c[0] as f64, c[1] as f64);
+        for &([x, y], [gx, gy]) in &self.edges {
+            let (dx, dy) = (f64::from(x) - cx, f64::from(y) - cy);
+            let d = dx.hypot(dy);
+            if d < r_min as f64 - 0.5 || d > r_max as f64 + 0.5 {
+                continue;
+            }
+            if (dx * f64::from(gx) + dy * f64::from(gy)) < RADIAL_COS * d {
+                continue;
+            }
+            self.histogram[(d.round() as usize).min(r_max + 1)] += 1;
+        }
+        // Counts per unit circumference, smoothed over three bins.
+        let density = |r: usize| {
+            let n: u32 = self.histogram[r.saturating_sub(1)..=(r + 1).min(r_max + 1)]
+                .iter()
+                .sum();
+            f64::from(n) / r.max(1) as f64
+        };
+        (r_min..=r_max)
+            .max_by(|&a, &b| density(a).total_cmp(&density(b)))
+            .filter(|&r| self.histogram[r] > 0 || density(r) > 0.0)
+            .map(|r| r as f64)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use image::GrayImage;
+
+    /// A dark disc (radius 60 px at (400, 300)) with a dark bar merged into
+    /// it, on a light background; decimated by 4.
+    fn scene(with_bar: bool) -> Decimated {
+        let img = GrayImage::from_fn(800, 600, |x, y| {
+            let (dx, dy) = (f64::from(x) - 400.0, f64::from(y) - 300.0);
+            let disc = dx.hypot(dy) < 60.0;
+            let bar = with_bar && (f64::from(y) - 300.0).abs() < 25.0 && x > 400;
+            image::Luma([if disc || bar { 40 } else { 180 }])
+        });
+        let mut d = Decimated::default();
+        d.update(&img, 4);
+        d
+    }
+
+    #[test]
+    fn finds_a_disc_with_its_radius_even_when_merged_with_a_bar() {
+        for with_bar in [false, true] {
+            let circles = EdgeVoter::default().find(&scene(with_bar), 12.0, 10.0, 200.0, 3);
+            let c = &circles[0];
+            let off = (c.centre_px[0] - 400.0).hypot(c.centre_px[1] - 300.0);
+            assert!(off < 6.0, "{with_bar}: {c:?}");
+            assert!((c.radius_px - 60.0).abs() < 8.0, "{with_bar}: {c:?}");
+        }
+    }
+
+    #[test]
+    fn a_uniform_frame_has_no_circles() {
+        let img = GrayImage::from_pixel(320, 240, image::Luma([120]));
+        let mut d = Decimated::default();
+        d.update(&img, 4);
+        assert!(
+            EdgeVoter::default()
+                .find(&d, 12.0, 10.0, 200.0, 3)
+                .is_empty()
+        );
+    }
+}
