@@ -1,7 +1,7 @@
 //! Prints the robustness sweep as the README's markdown table:
 //! `cargo run --release --example robustness_sweep -- [--frames N] [--seed S] [--only TEXT] [--dump DIR]`.
 //!
-//! `--frames` is per level (default 8, the test's); `--seed` changes the
+//! `--frames` is per level (default 10, the test's); `--seed` changes the
 //! scenes (default the test's); `--only` keeps the levels whose label
 //! contains TEXT (e.g. `range`); `--dump` writes the frames to DIR as PNG.
 
@@ -19,7 +19,7 @@ fn usage(message: &str) -> ! {
 }
 
 fn main() {
-    let mut frames: u64 = 8;
+    let mut frames: u64 = 10;
     let mut seed = sweep::SEED;
     let mut only: Option<String> = None;
     let mut dump: Option<std::path::PathBuf> = None;
