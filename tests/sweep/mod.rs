@@ -36,6 +36,9 @@ pub struct LevelStats {
     pub detected: usize,
     /// Detections on drogue-free frames, and gross errors.
     pub false_detections: usize,
+    /// Of the gross errors, those on unresolved detections (the answer
+    /// given is the mirror; the true one is reported as the alternative).
+    pub false_unresolved: usize,
     /// Per detection that is not gross: centre error (undistorted px),
     /// position error over range, normal error (degrees).
     pub centre_px: Vec<f64>,
@@ -162,6 +165,7 @@ fn score(stats: &mut LevelStats, m: &Measurement, truth: Option<&DrogueTruth>) {
     }
     if position_rel > GROSS_POSITION_REL || normal_deg > GROSS_NORMAL_DEG {
         stats.false_detections += 1;
+        stats.false_unresolved += usize::from(d.disambiguation == Disambiguation::Unresolved);
         return;
     }
     let e = &d.ellipse_px;
@@ -245,7 +249,7 @@ fn cell(x: f64, decimals: usize) -> String {
 /// The sweep as a markdown table (the README's).
 pub fn markdown(stats: &[LevelStats]) -> String {
     let mut out = String::from(
-        "| factor | setting | frames | detected | false | centre px | position % range | normal deg | rim right / wrong / unresolved |\n\
+        "| factor | setting | frames | detected | false (unresolved) | centre px | position % range | normal deg | rim right / wrong / unresolved |\n\
          |---|---|---:|---:|---:|---:|---:|---:|---:|\n",
     );
     for s in stats {
@@ -259,13 +263,18 @@ pub fn markdown(stats: &[LevelStats]) -> String {
         } else {
             "-".into()
         };
+        let false_detections = if s.false_unresolved > 0 {
+            format!("{} ({})", s.false_detections, s.false_unresolved)
+        } else {
+            s.false_detections.to_string()
+        };
         out.push_str(&format!(
             "| {} | {} | {} | {} | {} | {} | {} | {} | {} |\n",
             s.factor,
             s.setting,
             s.frames,
             detected,
-            s.false_detections,
+            false_detections,
             cell(s.centre_px_median(), 3),
             cell(s.position_pct_median(), 3),
             cell(s.normal_deg_median(), 2),
