@@ -5,7 +5,7 @@ use criterion::{Criterion, criterion_group, criterion_main};
 use drogue_vision::camera::CameraModel;
 use drogue_vision::config::Config;
 use drogue_vision::measure::FitQuality;
-use drogue_vision::measure::ambiguity::canopy_support;
+use drogue_vision::measure::ambiguity::{canopy_support, canopy_supports};
 use drogue_vision::measure::ellipse::{Conic, Ellipse};
 use drogue_vision::measure::pose::{CirclePose, cone_pose, pose_uncertainty};
 use drogue_vision::measure::track::Tracker;
@@ -84,10 +84,7 @@ fn bench(c: &mut Criterion) {
         let mut t_ns = 0u64;
         b.iter(|| {
             let [s0, s1]: [CirclePose; 2] = cone_pose(black_box(&ellipse), &cam, 0.15).unwrap();
-            let supports = [
-                canopy_support(&image, &cam, &s0, 0.33),
-                canopy_support(&image, &cam, &s1, 0.33),
-            ];
+            let supports = canopy_supports(&image, &cam, &[s0, s1], 0.33);
             t_ns += 33_000_000;
             let choice = tracker.choose([s0, s1], supports, t_ns, &ellipse);
             pose_uncertainty(&ellipse, &cam, &choice.pose, 0.15, &quality, &points)

@@ -13,7 +13,7 @@
 use drogue_vision::camera::CameraModel;
 use drogue_vision::config::Config;
 use drogue_vision::measure::Disambiguation;
-use drogue_vision::measure::ambiguity::canopy_support;
+use drogue_vision::measure::ambiguity::canopy_supports;
 use drogue_vision::measure::ellipse::Ellipse;
 use drogue_vision::measure::pose::{CirclePose, cone_pose};
 use drogue_vision::measure::track::Tracker;
@@ -135,8 +135,8 @@ fn answer_given_with_fit_error(
                 e.theta + sigma_px / e.a * gauss(&mut rng),
             );
             let solutions = cone_pose(&disturbed, &camera, t.radius).expect("a pose");
-            let supports = solutions
-                .map(|s| canopy_support(&image, &camera, &s, config.drogue.canopy_radius_m));
+            let supports =
+                canopy_supports(&image, &camera, &solutions, config.drogue.canopy_radius_m);
             let choice = Tracker::new(&config.track)
                 .unwrap()
                 .choose(solutions, supports, 0, &disturbed);
@@ -240,7 +240,7 @@ fn truth_ellipse_gives_truth_pose_and_rim_picks_it(set_name: &str) {
         assert!(alt_n_err < 1e-6, "{name}: alt normal {alt_n_err}");
 
         let image = image::open(set.join(name)).unwrap().to_luma8();
-        let supports = solutions.map(|s| canopy_support(&image, &camera, &s, canopy_radius));
+        let supports = canopy_supports(&image, &camera, &solutions, canopy_radius);
         let mut tracker = Tracker::new(&config.track).unwrap();
         let choice = tracker.choose(solutions, supports, 0, &ellipse);
         println!(

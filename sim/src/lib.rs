@@ -7,7 +7,9 @@
 //! [`trajectory`] (tanker, drogue with Dryden sway, bow wave and hose whip,
 //! receiver approach), [`camera`] (pinhole + plumb_bob, independent of
 //! drogue-vision's), [`conic`] (exact image ellipse and mirror pose),
-//! [`render`] (8-bit gray frames) and [`Simulator`] tying them together.
+//! [`render`] (8-bit gray frames) and [`Simulator`] tying them together;
+//! [`sweep`] renders randomised unrelated frames, one factor at a time, for
+//! robustness tests.
 
 pub mod camera;
 pub mod conic;
@@ -16,6 +18,7 @@ pub mod geometry;
 pub mod render;
 pub mod scenario;
 pub mod simulator;
+pub mod sweep;
 pub mod trajectory;
 pub mod turbulence;
 

@@ -12,6 +12,12 @@
 //! during the exposure, applied before the probe (which moves with the
 //! camera). Then vignetting, exposure gain, shot + read noise, 8-bit.
 //!
+//! Optional extras for robustness tests, all off by default (a scene without
+//! them renders bit-identically): flat [`Decal`]s behind everything (dark
+//! distractor blobs and rectangles, canopy-less discs and rings, crescents),
+//! a [`GlareStreak`] added at the sensor (saturating where it is strong), and
+//! frames without the drogue (`FrameScene::without_drogue`).
+//!
 //! Speed (a 1280x960 frame in 4-7 ms of one core's time, the first of a
 //! run about 10 ms; `benches/render.rs`):
 //! tubes become fragments (pixel, depth, coverage, radiance) blended in
@@ -197,6 +203,131 @@ pub struct FrameScene {
     /// Image motion of the drogue during the exposure, pixels.
     pub blur_px: [f64; 2],
     pub noise_seed: u64,
+    /// Leave the drogue out (drogue-free frames); default false.
+    pub without_drogue: bool,
+    /// Flat shapes behind the drogue and the tubes, painted in order; empty
+    /// by default.
+    pub decals: Vec<Decal>,
+    /// A sun-glare streak; `None` by default.
+    pub glare_streak: Option<GlareStreak>,
+}
+
+/// Outline of a [`Decal`] in its plane, metres.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum DecalShape {
+    /// A disc (a dark disc without a canopy, a blob, a balloon).
+    Disc { radius: f64 },
+    /// An annulus between two radii (a dark ring without a canopy).
+    Ring { inner: f64, outer: f64 },
+    /// A rectangle with half-sizes along `e1` and `e2`.
+    Rect { half_1: f64, half_2: f64 },
+    /// An irregular blob: radius `radius * (1 + wobble * w(phi))` with
+    /// w a fixed mix of the 2nd and 3rd harmonics (|w| <= 1) turned by
+    /// `phase` radians; `wobble` within 0..0.5.
+    Blob {
+        radius: f64,
+        wobble: f64,
+        phase: f64,
+    },
+}
+
+/// A flat, uniformly bright shape in the camera frame (plane through
+/// `centre` with unit normal `normal`, in-plane orthonormal axes `e1`, `e2`).
+/// Decals are background: the drogue, hose and probe are drawn over them,
+/// and they are neither blurred nor shaded, but hazed like every object.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Decal {
+    pub centre: V3,
+    pub normal: V3,
+    pub e1: V3,
+    pub e2: V3,
+    pub shape: DecalShape,
+    /// Relative radiance 0..1.
+    pub radiance: f64,
+}
+
+impl Decal {
+    /// A crescent: a dark disc of `radius` partly covered by a lighter disc
+    /// of `cover_radius` whose centre is `offset` metres along `e1`. The
+    /// crescent's outer arc is the dark disc's own circle, so its image is
+    /// a fine ellipse arc. Paint the two in the returned order.
+    #[allow(clippy::too_many_arguments)]
+    pub fn crescent(
+        centre: V3,
+        normal: V3,
+        e1: V3,
+        e2: V3,
+        radius: f64,
+        dark: f64,
+        cover_radius: f64,
+        offset: f64,
+        light: f64,
+    ) -> [Decal; 2] {
+        let disc = |centre: V3, radius: f64, radiance: f64| Decal {
+            centre,
+            normal,
+            e1,
+            e2,
+            shape: DecalShape::Disc { radius },
+            radiance,
+        };
+        [
+            disc(centre, radius, dark),
+            disc(centre + e1 * offset, cover_radius, light),
+        ]
+    }
+
+    /// Radius of a circle about `centre` that holds the whole shape, metres.
+    fn bounding_radius(&self) -> f64 {
+        match self.shape {
+            DecalShape::Disc { radius } => radius,
+            DecalShape::Ring { outer, .. } => outer,
+            DecalShape::Rect { half_1, half_2 } => half_1.hypot(half_2),
+            DecalShape::Blob { radius, wobble, .. } => radius * (1.0 + wobble.abs()),
+        }
+    }
+
+    /// Signed distance (metres, negative inside) of the in-plane point
+    /// (x, y) to the outline (for `Blob` the radial distance, close enough
+    /// for anti-aliasing).
+    fn signed_distance(&self, x: f64, y: f64) -> f64 {
+        match self.shape {
+            DecalShape::Disc { radius } => x.hypot(y) - radius,
+            DecalShape::Ring { inner, outer } => {
+                let rho = x.hypot(y);
+                (rho - outer).max(inner - rho)
+            }
+            DecalShape::Rect { half_1, half_2 } => {
+                let (qx, qy) = (x.abs() - half_1, y.abs() - half_2);
+                qx.max(0.0).hypot(qy.max(0.0)) + qx.max(qy).min(0.0)
+            }
+            DecalShape::Blob {
+                radius,
+                wobble,
+                phase,
+            } => {
+                let phi = y.atan2(x);
+                let w = 0.6 * (2.0 * phi + phase).sin() + 0.4 * (3.0 * phi + 2.0 * phase).sin();
+                x.hypot(y) - radius * (1.0 + wobble * w)
+            }
+        }
+    }
+}
+
+/// A sun-glare streak: a straight band of light added at the sensor (after
+/// vignetting, before noise), Gaussian across with full width at half
+/// maximum `width_px`, running across the whole frame. With a `strength`
+/// near 1 or more it saturates the pixels it crosses.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct GlareStreak {
+    /// A point of the band's centre line, pixels.
+    pub through_px: [f64; 2],
+    /// Direction of the centre line from +u toward +v, radians.
+    pub angle_rad: f64,
+    /// Full width at half maximum, pixels (> 0).
+    pub width_px: f64,
+    /// Radiance added on the centre line (relative, like the scene's).
+    pub strength: f64,
 }
 
 /// Scene-wide look (from the scenario).
@@ -397,6 +528,40 @@ fn nearest_strut(dirs: &[(f64, f64)], x: f64, y: f64, start: usize) -> usize {
     }
 }
 
+/// Adds the glare streak's light to image row `v` (gain applied).
+fn add_streak(row: &mut [f32], v: usize, s: &GlareStreak, gain: f32) {
+    let finite = [s.through_px[0], s.through_px[1], s.angle_rad, s.strength]
+        .iter()
+        .all(|x| x.is_finite());
+    if !(finite && s.width_px > 0.0 && s.width_px.is_finite()) {
+        return;
+    }
+    let sigma = s.width_px / (8.0 * std::f64::consts::LN_2).sqrt();
+    let reach = 4.0 * sigma;
+    let (sn, cs) = s.angle_rad.sin_cos();
+    // Signed distance of pixel u of this row to the centre line: a u + b.
+    let a = -sn;
+    let b = s.through_px[0] * sn + (v as f64 - s.through_px[1]) * cs;
+    let last = row.len().saturating_sub(1) as f64;
+    let (lo, hi) = if a.abs() < 1e-12 {
+        if b.abs() > reach {
+            return;
+        }
+        (0.0, last)
+    } else {
+        let (x0, x1) = ((-reach - b) / a, (reach - b) / a);
+        (x0.min(x1).max(0.0).ceil(), x0.max(x1).min(last).floor())
+    };
+    if lo > hi {
+        return;
+    }
+    let first = lo as usize;
+    for (k, r) in row[first..=hi as usize].iter_mut().enumerate() {
+        let d = (a * (first + k) as f64 + b) / sigma;
+        *r += (s.strength * (-0.5 * d * d).exp()) as f32 * gain;
+    }
+}
+
 /// 2^23: adding it to a float in [0, 2^23) leaves the float's integer
 /// part (rounded to nearest) in the low mantissa bits.
 const F32_INT_MAGIC: f32 = 8_388_608.0;
@@ -476,6 +641,16 @@ impl Renderer {
             hose_layer: TubeLayer::default(),
             probe_layer: TubeLayer::default(),
         }
+    }
+
+    /// Changes the scene-wide look (haze, exposure, noise, sky ...) while
+    /// keeping the camera's ray table: cheaper than a new renderer.
+    pub fn set_look(&mut self, look: Look) {
+        self.look = look;
+    }
+
+    pub fn look(&self) -> &Look {
+        &self.look
     }
 
     #[inline]
@@ -558,12 +733,31 @@ impl Renderer {
         if probe_layer.tube != probe || probe.is_none() {
             self.rasterise_tube(&mut probe_layer, probe);
         }
-        let bbox = self.drogue_bbox(&scene.drogue);
+        let bbox = if scene.without_drogue {
+            None
+        } else {
+            self.drogue_bbox(&scene.drogue)
+        };
+        let decal_boxes: Vec<(&Decal, PixelBox)> = scene
+            .decals
+            .iter()
+            .filter_map(|d| {
+                Some((
+                    d,
+                    self.disc_bbox(&d.centre, &d.e1, &d.e2, d.bounding_radius())?,
+                ))
+            })
+            .collect();
         let m = scene.blur_px;
         let blur_len = (m[0] * m[0] + m[1] * m[1]).sqrt();
         let mut dirty = vec![false; h];
         for &v in hose_layer.rows.iter().chain(&probe_layer.rows) {
             dirty[v] = true;
+        }
+        for (_, b) in &decal_boxes {
+            for d in &mut dirty[b.1..=b.3] {
+                *d = true;
+            }
         }
         if let Some(b) = bbox {
             let pad = (blur_len / 2.0).ceil() as usize + 2;
@@ -582,6 +776,9 @@ impl Renderer {
                 &mut rad[v * w..(v + 1) * w],
             );
         }
+        for (decal, b) in &decal_boxes {
+            self.draw_decal(&mut rad, decal, *b);
+        }
         self.composite_tube(&mut rad, &hose_layer, None);
         if let Some(b) = bbox {
             self.draw_drogue(&mut rad, &scene.drogue, b);
@@ -591,7 +788,14 @@ impl Renderer {
         }
         self.composite_tube(&mut rad, &probe_layer, bbox.map(|b| (&scene.drogue, b)));
         // 3. Sensor: vignette, glare veil, gain, noise, 8 bits.
-        let img = self.sensor(&mut rad, &dirty, &sky_grid, &veil_grid, scene.noise_seed);
+        let img = self.sensor(
+            &mut rad,
+            &dirty,
+            &sky_grid,
+            &veil_grid,
+            scene.glare_streak.as_ref(),
+            scene.noise_seed,
+        );
         self.rad = rad;
         self.hose_layer = hose_layer;
         self.probe_layer = probe_layer;
@@ -600,11 +804,21 @@ impl Renderer {
 
     /// Pixel bounding box (u0, v0, u1, v1), inclusive, of the canopy.
     fn drogue_bbox(&self, d: &DrogueView) -> Option<PixelBox> {
+        self.disc_bbox(&d.centre, &d.e1, &d.e2, d.canopy_radius * 1.02)
+    }
+
+    /// Pixel bounding box (u0, v0, u1, v1), inclusive, of the circle of
+    /// radius `r` about `centre` in the plane spanned by `e1`, `e2`; the
+    /// whole frame when it comes near the camera plane or beyond the lens
+    /// model's range, `None` when it is out of the frame.
+    fn disc_bbox(&self, centre: &V3, e1: &V3, e2: &V3, r: f64) -> Option<PixelBox> {
         let (mut u0, mut v0, mut u1, mut v1) = (f64::MAX, f64::MAX, f64::MIN, f64::MIN);
-        let r = d.canopy_radius * 1.02;
+        if !(r.is_finite() && centre.iter().all(|x| x.is_finite())) {
+            return None;
+        }
         for k in 0..72 {
             let a = k as f64 * std::f64::consts::TAU / 72.0;
-            let p = d.centre + (d.e1 * a.cos() + d.e2 * a.sin()) * r;
+            let p = centre + (e1 * a.cos() + e2 * a.sin()) * r;
             if p.z < 0.02 {
                 return Some((0, 0, self.w - 1, self.h - 1));
             }
@@ -630,6 +844,53 @@ impl Renderer {
             cl(u1 + m + 1.0, self.w),
             cl(v1 + m + 1.0, self.h),
         ))
+    }
+
+    /// A decal over its box: each pixel's ray meets the decal's plane, the
+    /// outline's signed distance there is turned into pixels by its change
+    /// to the next pixel in u and v, and gives the coverage.
+    #[inline(never)]
+    fn draw_decal(&self, rad: &mut [f32], d: &Decal, b: PixelBox) {
+        let nc = d.normal.dot(&d.centre);
+        let distance_at = |u: usize, v: usize| -> Option<f64> {
+            let ray = self.ray(u, v);
+            let nd = d.normal.dot(&ray);
+            if nd.abs() < 1e-12 {
+                return None;
+            }
+            let t = nc / nd;
+            if t <= 0.0 {
+                return None;
+            }
+            let p = ray * t - d.centre;
+            Some(d.signed_distance(p.dot(&d.e1), p.dot(&d.e2)))
+        };
+        let value = self.haze(d.radiance) as f32;
+        for v in b.1..=b.3 {
+            let (vn, sv) = if v + 1 < self.h {
+                (v + 1, 1.0)
+            } else {
+                (v - 1, -1.0)
+            };
+            for u in b.0..=b.2 {
+                let (un, su) = if u + 1 < self.w {
+                    (u + 1, 1.0)
+                } else {
+                    (u - 1, -1.0)
+                };
+                let (Some(sd), Some(sd_u), Some(sd_v)) =
+                    (distance_at(u, v), distance_at(un, v), distance_at(u, vn))
+                else {
+                    continue;
+                };
+                let per_px = ((sd_u - sd) * su).hypot((sd_v - sd) * sv).max(1e-12);
+                let cov = clamp01(0.5 - sd / per_px) as f32;
+                if cov > 0.0 {
+                    let o = &mut rad[v * self.w + u];
+                    *o += (value - *o) * cov;
+                }
+            }
+        }
     }
 
     /// The drogue, pixel by pixel over its box: each pixel's ray meets the
@@ -972,6 +1233,7 @@ impl Renderer {
         dirty: &[bool],
         sky_grid: &[f32],
         veil_grid: &[f32],
+        streak: Option<&GlareStreak>,
         seed: u64,
     ) -> GrayImage {
         let (w, h) = (self.w, self.h);
@@ -1017,6 +1279,9 @@ impl Renderer {
                     *slot = a + (veil_grid[(j + 1) * self.gw + i] - a) * fy;
                 }
                 add_lerp_columns(&veil_row, gain, row);
+            }
+            if let Some(s) = streak {
+                add_streak(row, v, s, gain);
             }
             let dst = &mut out[v * w..(v + 1) * w];
             if noisy {

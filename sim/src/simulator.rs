@@ -235,6 +235,9 @@ impl Simulator {
             blur_px,
             noise_seed: sc.seed.wrapping_mul(0x9e37_79b9_7f4a_7c15)
                 ^ self.seq.wrapping_mul(0xbf58_476d_1ce4_e5b9),
+            without_drogue: false,
+            decals: Vec::new(),
+            glare_streak: None,
         };
         let truth = self.truth(st, &scene, &hose, &probe);
         (scene, truth)

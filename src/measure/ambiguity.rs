@@ -12,6 +12,18 @@
 //! The rim is darker than the sky around it (a dark band at the canopy's edge),
 //! so the edge we look for gets brighter going outward. Its inner side (band
 //! against the lighter canopy) has the opposite polarity and is not counted.
+//!
+//! Far away the two predictions merge: the image is then nearly affine, and
+//! an affine view maps the concentric rim of both solutions to the same
+//! ellipse (the inner one scaled about its centre). At 12-16 m the two
+//! predicted rims of the reference camera are often less than a pixel
+//! apart, closer than the rim's edge can be placed. [`canopy_supports`]
+//! therefore judges the two solutions only on the points where their
+//! predicted rims are farther apart than the edge's own scatter (3 times
+//! its RMS, at least [`MIN_SEPARATION_PX`]), only when there are
+//! [`MIN_DISCRIMINATING`] such points, and only when the difference in
+//! edges found is beyond chance ([`MIN_EVIDENCE_Z`]); otherwise the rim
+//! says nothing and the answer stays `unresolved` (or goes to continuity).
 
 use super::detect::rim;
 use super::pose::CirclePose;
@@ -44,6 +56,20 @@ const MIN_SHARE_IN_IMAGE: f64 = 0.5;
 /// Smallest predicted rim (semi-minor axis, pixels) worth judging: below this
 /// the two predictions are within the search band of each other anyway.
 const MIN_RIM_SIZE_PX: f64 = 4.0;
+
+/// A rim point tells the two solutions apart only when it is at least this
+/// far from the other solution's predicted rim, pixels (whatever the edge
+/// scatter: an 8-bit edge placed to better than this is not to be relied on)
+pub const MIN_SEPARATION_PX: f64 = 0.5;
+/// ... and at least this many times the edge scatter.
+pub const SEPARATION_SIGMAS: f64 = 3.0;
+/// The two solutions' edge counts on their telling points must differ by at
+/// least this many standard deviations of a chance difference.
+pub const MIN_EVIDENCE_Z: f64 = 3.0;
+/// Points (of `SAMPLES`) that must tell the solutions apart, for each
+/// solution, before the rim may judge between them: with fewer, a few
+/// stray edges (struts, clouds, noise) would decide.
+pub const MIN_DISCRIMINATING: usize = 12;
 
 /// Offsets searched across the curve: -SEARCH_PX..=SEARCH_PX.
 const SEARCH_STEPS: usize = (2.0 * SEARCH_PX / SEARCH_STEP_PX) as usize + 1;
@@ -119,6 +145,159 @@ pub fn canopy_support(
     pose: &CirclePose,
     canopy_radius_m: f64,
 ) -> Option<f64> {
+    let rim = predicted_rim(camera, pose, canopy_radius_m)?;
+    support_on(image, &rim, |_| true)
+}
+
+/// The two solutions' canopy supports (as [`canopy_support`]) judged only on
+/// the points that tell them apart, or `[None, None]` when the rim cannot
+/// tell them apart:
+///
+/// - a point tells them apart when it lies farther from the other
+///   solution's predicted rim than the edge can be placed: at least
+///   `SEPARATION_SIGMAS` times the edge scatter (RMS offset of the edges
+///   found within the tolerance of the better-supported solution's rim:
+///   noise, blur and the prediction's own error), and never less than
+///   `MIN_SEPARATION_PX`;
+/// - each solution needs `MIN_DISCRIMINATING` such points in the image;
+/// - the difference in edges found on them must be real: the counts
+///   (b, c) must differ by `MIN_EVIDENCE_Z` standard deviations of a
+///   chance difference, (b - c) / sqrt(b + c).
+///
+/// Far away (the reference camera at 12-16 m) the two predicted rims are
+/// less than half a pixel apart and the answer is `None`; at 8 m they are
+/// about a pixel apart, which a clear rim's edges (scatter ~0.1 px) still
+/// resolve.
+pub fn canopy_supports(
+    image: &GrayImage,
+    camera: &CameraModel,
+    solutions: &[CirclePose; 2],
+    canopy_radius_m: f64,
+) -> [Option<f64>; 2] {
+    let rims = solutions.map(|pose| predicted_rim(camera, &pose, canopy_radius_m));
+    let [Some(rim0), Some(rim1)] = &rims else {
+        return [None, None];
+    };
+    let offsets = [edge_offsets(image, rim0), edge_offsets(image, rim1)];
+    let in_image = |o: &[Option<Option<f64>>]| o.iter().filter(|x| x.is_some()).count();
+    if offsets
+        .iter()
+        .any(|o| (in_image(o) as f64) < MIN_SHARE_IN_IMAGE * SAMPLES as f64)
+    {
+        return [None, None];
+    }
+    let matched = |o: &Option<Option<f64>>| match o {
+        Some(Some(x)) if x.abs() <= TOLERANCE_PX => Some(*x),
+        _ => None,
+    };
+    // Edge scatter along the better-supported rim.
+    let found = offsets
+        .each_ref()
+        .map(|o| o.iter().filter_map(matched).collect::<Vec<f64>>());
+    let better = if found[0].len() >= found[1].len() {
+        0
+    } else {
+        1
+    };
+    let scatter = if found[better].is_empty() {
+        TOLERANCE_PX
+    } else {
+        (found[better].iter().map(|x| x * x).sum::<f64>() / found[better].len() as f64).sqrt()
+    };
+    let min_separation = (SEPARATION_SIGMAS * scatter).max(MIN_SEPARATION_PX);
+    let apart = |from: &[RimPoint], to: &[RimPoint]| -> Vec<bool> {
+        let mut near = None;
+        from.iter()
+            .map(|p| {
+                let (d, k) = distance_to_rim(p.at, to, near);
+                near = Some(k);
+                d >= min_separation
+            })
+            .collect()
+    };
+    let apart = [apart(rim0, rim1), apart(rim1, rim0)];
+    let mut judged = [0usize; 2];
+    let mut edges = [0usize; 2];
+    for i in 0..2 {
+        for (o, use_it) in offsets[i].iter().zip(&apart[i]) {
+            if *use_it && o.is_some() {
+                judged[i] += 1;
+                edges[i] += usize::from(matched(o).is_some());
+            }
+        }
+    }
+    if judged.iter().any(|&n| n < MIN_DISCRIMINATING) {
+        return [None, None];
+    }
+    let (b, c) = (edges[0] as f64, edges[1] as f64);
+    if b + c == 0.0 || (b - c).abs() / (b + c).sqrt() < MIN_EVIDENCE_Z {
+        return [None, None];
+    }
+    [Some(b / judged[0] as f64), Some(c / judged[1] as f64)]
+}
+
+/// Per rim point, the outward edge's offset from it (`Some(None)`: no edge,
+/// `None`: outside the image).
+fn edge_offsets(image: &GrayImage, rim: &[RimPoint]) -> Vec<Option<Option<f64>>> {
+    let mut grey = Vec::with_capacity(PROFILE_LEN);
+    rim.iter()
+        .map(|p| outward_edge_offset(image, p.at, p.out, &mut grey))
+        .collect()
+}
+
+/// One point of a predicted rim: where it is and the image direction in
+/// which it moves as the radius grows (unit).
+#[derive(Clone, Copy, Debug)]
+struct RimPoint {
+    at: [f64; 2],
+    out: [f64; 2],
+}
+
+/// Distance from `p` to the closed polyline through `rim` (pixels), and the
+/// index of the rim point nearest to `p`. The nearest point is found by
+/// climbing from `start` (the previous query's, as consecutive queries go
+/// round the rim in order), so a query costs a few steps, not the whole rim;
+/// without a start it is searched among all. The distance is to the two
+/// segments either side of it.
+fn distance_to_rim(p: [f64; 2], rim: &[RimPoint], start: Option<usize>) -> (f64, usize) {
+    let n = rim.len();
+    let d2 = |k: usize| (rim[k].at[0] - p[0]).powi(2) + (rim[k].at[1] - p[1]).powi(2);
+    let mut k = match start {
+        Some(k) => k % n,
+        None => (0..n).min_by(|&a, &b| d2(a).total_cmp(&d2(b))).unwrap_or(0),
+    };
+    loop {
+        let (next, prev) = ((k + 1) % n, (k + n - 1) % n);
+        if d2(next) < d2(k) {
+            k = next;
+        } else if d2(prev) < d2(k) {
+            k = prev;
+        } else {
+            break;
+        }
+    }
+    let segment = |a: [f64; 2], b: [f64; 2]| {
+        let d = [b[0] - a[0], b[1] - a[1]];
+        let len2 = d[0] * d[0] + d[1] * d[1];
+        let t = if len2 > 0.0 {
+            (((p[0] - a[0]) * d[0] + (p[1] - a[1]) * d[1]) / len2).clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
+        (p[0] - a[0] - t * d[0]).hypot(p[1] - a[1] - t * d[1])
+    };
+    let here = rim[k].at;
+    let dist = segment(rim[(k + n - 1) % n].at, here).min(segment(here, rim[(k + 1) % n].at));
+    (dist, k)
+}
+
+/// The rim `pose` predicts (points projected through the lens) when it is
+/// big enough to judge; `None` otherwise.
+fn predicted_rim(
+    camera: &CameraModel,
+    pose: &CirclePose,
+    canopy_radius_m: f64,
+) -> Option<Vec<RimPoint>> {
     let n = pose.normal_camera;
     if !(canopy_radius_m > 0.0 && n.iter().all(|x| x.is_finite()) && n.norm() > 0.5) {
         return None;
@@ -132,8 +311,7 @@ pub fn canopy_support(
     let e1 = n.cross(&helper).normalize();
     let e2 = n.cross(&e1);
 
-    let (mut judged, mut with_edge) = (0usize, 0usize);
-    let mut grey = Vec::with_capacity(PROFILE_LEN);
+    let mut rim = Vec::with_capacity(SAMPLES);
     let (mut min_u, mut max_u, mut min_v, mut max_v) = (
         f64::INFINITY,
         f64::NEG_INFINITY,
@@ -158,15 +336,36 @@ pub fn canopy_support(
         max_u = max_u.max(p[0]);
         min_v = min_v.min(p[1]);
         max_v = max_v.max(p[1]);
-        if let Some(edge) = outward_edge_offset(image, p, [d[0] / len, d[1] / len], &mut grey) {
-            judged += 1;
-            if edge.is_some_and(|o| o.abs() <= TOLERANCE_PX) {
-                with_edge += 1;
-            }
-        }
+        rim.push(RimPoint {
+            at: p,
+            out: [d[0] / len, d[1] / len],
+        });
     }
     let big_enough = (max_u - min_u).min(max_v - min_v) >= 2.0 * MIN_RIM_SIZE_PX;
-    if !big_enough || (judged as f64) < MIN_SHARE_IN_IMAGE * SAMPLES as f64 {
+    (big_enough && rim.len() >= 3).then_some(rim)
+}
+
+/// Share of the rim points picked by `use_point` (by index) with an edge
+/// within the tolerance; `None` when less than `MIN_SHARE_IN_IMAGE` of all
+/// `SAMPLES` could be judged (outside the image), or none was picked.
+fn support_on(
+    image: &GrayImage,
+    rim: &[RimPoint],
+    use_point: impl Fn(usize) -> bool,
+) -> Option<f64> {
+    let (mut in_image, mut judged, mut with_edge) = (0usize, 0usize, 0usize);
+    let mut grey = Vec::with_capacity(PROFILE_LEN);
+    for (k, p) in rim.iter().enumerate() {
+        let Some(edge) = outward_edge_offset(image, p.at, p.out, &mut grey) else {
+            continue;
+        };
+        in_image += 1;
+        if use_point(k) {
+            judged += 1;
+            with_edge += usize::from(edge.is_some_and(|o| o.abs() <= TOLERANCE_PX));
+        }
+    }
+    if (in_image as f64) < MIN_SHARE_IN_IMAGE * SAMPLES as f64 || judged == 0 {
         return None;
     }
     Some(with_edge as f64 / judged as f64)
@@ -243,6 +442,64 @@ mod tests {
         // Wrong polarity: the band's inner edge (r = 0.30) is not the rim.
         let inner = canopy_support(&image, &cam, &truth, 0.30).unwrap();
         assert!(inner < 0.1, "inner edge support {inner}");
+    }
+
+    /// On the optical axis the two cone solutions are exact mirrors:
+    /// (nx, ny, nz) and (-nx, -ny, nz) about the same centre.
+    fn on_axis_pair(range_m: f64) -> [CirclePose; 2] {
+        let n =
+            (nalgebra::Rotation3::new(Vector3::new(0.0, 0.35, 0.0)) * -Vector3::z()).normalize();
+        let truth = CirclePose {
+            centre_camera_m: Vector3::new(0.0, 0.0, range_m),
+            normal_camera: n,
+        };
+        let mirror = CirclePose {
+            normal_camera: Vector3::new(-n.x, -n.y, n.z),
+            ..truth
+        };
+        [truth, mirror]
+    }
+
+    #[test]
+    fn rims_apart_decide_and_rims_together_do_not() {
+        let cam = camera();
+        // 2 m: the predicted rims are pixels apart; the truth has the edges.
+        let near = on_axis_pair(2.0);
+        let image = render(&cam, &near[0]);
+        let [s0, s1] = canopy_supports(&image, &cam, &near, 0.33);
+        let (s0, s1) = (s0.unwrap(), s1.unwrap());
+        assert!(s0 > 0.9 && s1 < 0.1, "near: {s0} {s1}");
+        // 10 m (a 26 px rim at f = 800 px): the two rims are within half a
+        // pixel of each other, and the rim must not decide, though the
+        // whole-rim supports are both high.
+        let far = on_axis_pair(10.0);
+        let image = render(&cam, &far[0]);
+        let whole = far.map(|p| canopy_support(&image, &cam, &p, 0.33).unwrap());
+        assert!(whole[0] > 0.8 && whole[1] > 0.8, "{whole:?}");
+        assert_eq!(canopy_supports(&image, &cam, &far, 0.33), [None, None]);
+    }
+
+    #[test]
+    fn distance_to_rim_matches_a_full_search() {
+        let rim: Vec<RimPoint> = (0..SAMPLES)
+            .map(|k| {
+                let t = k as f64 * std::f64::consts::TAU / SAMPLES as f64;
+                RimPoint {
+                    at: [100.0 + 80.0 * t.cos(), 50.0 + 20.0 * t.sin()],
+                    out: [t.cos(), t.sin()],
+                }
+            })
+            .collect();
+        let mut near = None;
+        for k in 0..SAMPLES {
+            let t = (k as f64 + 0.5) * std::f64::consts::TAU / SAMPLES as f64;
+            let p = [100.0 + 81.0 * t.cos(), 50.0 + 21.0 * t.sin()];
+            let (d, i) = distance_to_rim(p, &rim, near);
+            near = Some(i);
+            let (full, _) = distance_to_rim(p, &rim, None);
+            assert!((d - full).abs() < 1e-12, "{k}: {d} vs {full}");
+            assert!(d > 0.3 && d < 1.1, "{k}: {d}");
+        }
     }
 
     #[test]

@@ -189,15 +189,12 @@ impl Measurer {
             let t = Instant::now();
             let [first, second] =
                 pose::cone_pose(&fitted.ellipse, &self.camera, self.inner_radius_m)?;
-            let canopy_scores = [
-                ambiguity::canopy_support(&frame.image, &self.camera, &first, self.canopy_radius_m),
-                ambiguity::canopy_support(
-                    &frame.image,
-                    &self.camera,
-                    &second,
-                    self.canopy_radius_m,
-                ),
-            ];
+            let canopy_scores = ambiguity::canopy_supports(
+                &frame.image,
+                &self.camera,
+                &[first, second],
+                self.canopy_radius_m,
+            );
             let choice = self.tracker.choose(
                 [first, second],
                 canopy_scores,

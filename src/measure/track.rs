@@ -5,6 +5,15 @@
 //! A track lives while detections keep coming no more than `max_gap_ms`
 //! apart; a longer gap (or time running backwards, e.g. a replay jumping)
 //! ends it, and the next detection starts a new track with the next epoch.
+//!
+//! Continuity is stricter than the track: it settles the ambiguity only when
+//! the last detection is at most `continuity_max_gap_ms` old and the new
+//! centre is within what the drogue can move in that time
+//! (`continuity_max_speed_mps`, plus [`CONTINUITY_POSITION_NOISE`] of the
+//! range for the measurement's own scatter). A folder of unrelated images
+//! processed as a sequence (`process` without `--independent` stamps them
+//! 33 ms apart) then does not hand one image's normal to the next: their
+//! drogues are not where the last one was.
 
 use super::Disambiguation;
 use super::ellipse::Ellipse;
@@ -28,7 +37,28 @@ pub struct TrackConfig {
     /// tracked normal (extrapolated at constant angular velocity) than the
     /// other's by at least this, degrees.
     pub continuity_margin_deg: f64,
+    /// Continuity may settle the ambiguity only when the last detection is at
+    /// most this old, milliseconds.
+    #[serde(default = "default_continuity_max_gap_ms")]
+    pub continuity_max_gap_ms: f64,
+    /// ... and the drogue's centre has moved no faster than this since,
+    /// metres per second (relative to the camera).
+    #[serde(default = "default_continuity_max_speed_mps")]
+    pub continuity_max_speed_mps: f64,
 }
+
+fn default_continuity_max_gap_ms() -> f64 {
+    100.0
+}
+
+fn default_continuity_max_speed_mps() -> f64 {
+    5.0
+}
+
+/// Scatter of a measured centre allowed on top of the motion, as a share of
+/// the range: the position error is ~0.1 % of the range on clear frames and
+/// a few tenths of a percent on hard ones.
+pub const CONTINUITY_POSITION_NOISE: f64 = 0.01;
 
 /// The tracker's decision for one frame.
 #[derive(Clone, Copy, Debug)]
@@ -48,6 +78,8 @@ struct TrackState {
     /// Rate of change of `ellipse` per second, once two detections are known.
     velocity_per_s: Option<EllipseParams>,
     normal_camera: Vector3<f64>,
+    /// Centre of the chosen pose, camera frame, metres.
+    centre_camera_m: Vector3<f64>,
     /// The tracked normal came from a settled ambiguity (rim or continuity
     /// from a settled one), so continuity may settle the next frame.
     resolved: bool,
@@ -59,6 +91,8 @@ pub struct Tracker {
     canopy_min_difference: f64,
     canopy_min_support: f64,
     continuity_margin_rad: f64,
+    continuity_max_gap_ns: u64,
+    continuity_max_speed_mps: f64,
     track: Option<TrackState>,
     /// The current track's last chosen normals with their times, oldest first.
     normals: VecDeque<(u64, Vector3<f64>)>,
@@ -123,6 +157,18 @@ impl Tracker {
                 0.0,
                 90.0,
             ),
+            (
+                "continuity_max_gap_ms",
+                cfg.continuity_max_gap_ms,
+                0.0,
+                cfg.max_gap_ms,
+            ),
+            (
+                "continuity_max_speed_mps",
+                cfg.continuity_max_speed_mps,
+                0.0,
+                1000.0,
+            ),
         ];
         for (key, value, min, max) in checks {
             if !(min..=max).contains(&value) {
@@ -134,6 +180,8 @@ impl Tracker {
             canopy_min_difference: cfg.canopy_min_difference,
             canopy_min_support: cfg.canopy_min_support,
             continuity_margin_rad: cfg.continuity_margin_deg.to_radians(),
+            continuity_max_gap_ns: (cfg.continuity_max_gap_ms * 1e6) as u64,
+            continuity_max_speed_mps: cfg.continuity_max_speed_mps,
             track: None,
             normals: VecDeque::with_capacity(NORMAL_HISTORY),
             epoch: 0,
@@ -161,9 +209,27 @@ impl Tracker {
         ellipse_from_params(&predicted).or_else(|| ellipse_from_params(&track.ellipse))
     }
 
+    /// Whether the track's last pose is close enough in time and space to
+    /// `centre_camera_m` at `time_ns` for continuity to settle the ambiguity.
+    fn continuity_applies(
+        &self,
+        t: &TrackState,
+        centre_camera_m: &Vector3<f64>,
+        time_ns: u64,
+    ) -> bool {
+        let dt_ns = time_ns.saturating_sub(t.time_ns);
+        if time_ns < t.time_ns || dt_ns > self.continuity_max_gap_ns {
+            return false;
+        }
+        let moved = (centre_camera_m - t.centre_camera_m).norm();
+        let allowed = self.continuity_max_speed_mps * dt_ns as f64 * 1e-9
+            + CONTINUITY_POSITION_NOISE * centre_camera_m.norm();
+        moved <= allowed
+    }
+
     /// Picks one of the two cone solutions and updates the track:
-    /// the canopy rim when it decides, else continuity with a settled track,
-    /// else unresolved (the solution nearest the track's predicted normal, or
+    /// the canopy rim when it decides, else continuity with a settled track
+    /// whose last pose is close in time and space, else unresolved (the solution nearest the track's predicted normal, or
     /// the first, with the other reported as `alternative`).
     pub fn choose(
         &mut self,
@@ -201,7 +267,8 @@ impl Tracker {
             // the same pose to within the margin (then either is right).
             let decisive =
                 (a0 - a1).abs() >= self.continuity_margin_rad || apart < self.continuity_margin_rad;
-            (if a0 <= a1 { 0 } else { 1 }, decisive && t.resolved)
+            let near = self.continuity_applies(&t, &solutions[0].centre_camera_m, capture_time_ns);
+            (if a0 <= a1 { 0 } else { 1 }, decisive && near && t.resolved)
         });
         let (index, how) = match (by_canopy, nearest_to_track) {
             (Some(i), _) => (i, Disambiguation::CanopyRim),
@@ -227,6 +294,7 @@ impl Tracker {
             ellipse: params,
             velocity_per_s,
             normal_camera: pose.normal_camera,
+            centre_camera_m: pose.centre_camera_m,
             resolved: how != Disambiguation::Unresolved,
         });
         Choice {
@@ -266,6 +334,8 @@ mod tests {
             canopy_min_difference: 0.2,
             canopy_min_support: 0.5,
             continuity_margin_deg: 3.0,
+            continuity_max_gap_ms: 100.0,
+            continuity_max_speed_mps: 5.0,
         }
     }
 
@@ -392,6 +462,116 @@ mod tests {
                 .err()
                 .unwrap()
                 .contains("canopy_min_support")
+        );
+    }
+
+    fn pose_at(nx: f64, centre: [f64; 3]) -> CirclePose {
+        CirclePose {
+            centre_camera_m: Vector3::new(centre[0], centre[1], centre[2]),
+            ..pose(nx)
+        }
+    }
+
+    /// Unrelated images stamped 33 ms apart (a folder processed as a
+    /// sequence): the drogue is elsewhere, so the rim-settled first image's
+    /// normal is not handed to the second.
+    #[test]
+    fn continuity_needs_the_last_pose_near_in_space() {
+        let mut t = Tracker::new(&config()).unwrap();
+        let c = t.choose(
+            [
+                pose_at(0.5, [0.0, 0.0, 5.0]),
+                pose_at(-0.5, [0.0, 0.0, 5.0]),
+            ],
+            [Some(0.9), Some(0.1)],
+            0,
+            &ellipse(100.0),
+        );
+        assert_eq!(c.how, Disambiguation::CanopyRim);
+        // 33 ms later 1 m away (30 m/s): not the same drogue's motion.
+        let c = t.choose(
+            [
+                pose_at(0.48, [1.0, 0.0, 5.0]),
+                pose_at(-0.48, [1.0, 0.0, 5.0]),
+            ],
+            [None, None],
+            33 * MS,
+            &ellipse(300.0),
+        );
+        assert_eq!(c.how, Disambiguation::Unresolved);
+        assert!(c.alternative.is_some());
+        // The unresolved frame leaves the track unsettled: the next frame,
+        // near it, is not settled by continuity either.
+        let c = t.choose(
+            [
+                pose_at(0.47, [1.0, 0.0, 5.0]),
+                pose_at(-0.47, [1.0, 0.0, 5.0]),
+            ],
+            [None, None],
+            66 * MS,
+            &ellipse(300.0),
+        );
+        assert_eq!(c.how, Disambiguation::Unresolved);
+        // Within reach (0.1 m in 33 ms = 3 m/s, below 5 m/s + 1 % of range):
+        // continuity after a rim-settled frame.
+        t.reset();
+        t.choose(
+            [
+                pose_at(0.5, [0.0, 0.0, 5.0]),
+                pose_at(-0.5, [0.0, 0.0, 5.0]),
+            ],
+            [Some(0.9), Some(0.1)],
+            0,
+            &ellipse(100.0),
+        );
+        let c = t.choose(
+            [
+                pose_at(-0.48, [0.1, 0.0, 5.0]),
+                pose_at(0.48, [0.1, 0.0, 5.0]),
+            ],
+            [None, None],
+            33 * MS,
+            &ellipse(104.0),
+        );
+        assert_eq!(c.how, Disambiguation::Continuity);
+        assert_eq!(c.pose, pose_at(0.48, [0.1, 0.0, 5.0]));
+    }
+
+    /// A gap longer than `continuity_max_gap_ms` (but within the track's
+    /// `max_gap_ms`) keeps the track for the search but not for continuity.
+    #[test]
+    fn continuity_needs_the_last_pose_near_in_time() {
+        let mut t = Tracker::new(&config()).unwrap();
+        t.choose(
+            [pose(0.5), pose(-0.5)],
+            [Some(0.9), Some(0.1)],
+            0,
+            &ellipse(100.0),
+        );
+        assert!(t.search_hint(200 * MS).is_some());
+        let c = t.choose(
+            [pose(0.5), pose(-0.5)],
+            [None, None],
+            200 * MS,
+            &ellipse(100.0),
+        );
+        assert_eq!(c.how, Disambiguation::Unresolved);
+        assert_eq!(c.track_epoch, 0, "the track itself lives on");
+    }
+
+    #[test]
+    fn continuity_gap_beyond_the_track_gap_is_refused() {
+        let mut c = config();
+        c.continuity_max_gap_ms = 600.0;
+        let e = Tracker::new(&c).err().unwrap();
+        assert!(e.contains("continuity_max_gap_ms"), "{e}");
+        let mut c = config();
+        c.continuity_max_speed_mps = -1.0;
+        assert!(
+            Tracker::new(&c)
+                .err()
+                .unwrap()
+                .contains("continuity_max_speed_mps")
         );
     }
 

@@ -378,3 +378,153 @@ fn floor_f64_matches_floor() {
         }
     }
 }
+
+/// A plain scene of `scene_at`'s kind: no noise, no blur, no tubes.
+fn plain(name: &str) -> (SimCamera, FrameScene, Renderer) {
+    let (cam, mut scene) = scene_at(name, 0);
+    scene.hose = None;
+    scene.probe = None;
+    scene.blur_px = [0.0, 0.0];
+    let mut l = look();
+    l.haze = 0.0;
+    let r = Renderer::new(&cam, l);
+    (cam, scene, r)
+}
+
+/// A canopy-less dark disc covers the area of its exact image ellipse
+/// (from the conic, not the renderer), and nothing outside it.
+#[test]
+fn decal_disc_covers_its_exact_ellipse() {
+    let (mut cam, mut scene, _) = plain("approach");
+    cam.distortion = [0.0; 5];
+    let mut r = Renderer::new(&cam, {
+        let mut l = look();
+        l.haze = 0.0;
+        l
+    });
+    let centre = V3::new(0.4, -0.2, 4.0);
+    let normal = V3::new(0.3, 0.2, -1.0).normalize();
+    let e1 = crate::geometry::perpendicular(&normal);
+    let e2 = normal.cross(&e1);
+    scene.without_drogue = true;
+    let sky = r.render(&scene);
+    scene.decals = vec![Decal {
+        centre,
+        normal,
+        e1,
+        e2,
+        shape: DecalShape::Disc { radius: 0.25 },
+        radiance: 0.0,
+    }];
+    let img = r.render(&scene);
+    let e = crate::conic::conic_to_ellipse(
+        &crate::conic::circle_image_conic(&cam, &centre, &normal, 0.25).unwrap(),
+    )
+    .unwrap();
+    // Coverage from the darkening relative to the sky (radiance 0 inside).
+    let mut covered = 0.0;
+    for (p, s) in img.pixels().zip(sky.pixels()) {
+        let (p, s) = (f64::from(p[0]), f64::from(s[0]));
+        if s > 0.0 {
+            covered += ((s - p) / s).clamp(0.0, 1.0);
+        }
+    }
+    let area = std::f64::consts::PI * e.a * e.b;
+    assert!(
+        (covered - area).abs() < 0.01 * area,
+        "covered {covered:.0} px, ellipse {area:.0} px"
+    );
+    // Outside the ellipse by 2 px, the sky is untouched.
+    let (s, c) = e.theta.sin_cos();
+    for (u, v, p) in img.enumerate_pixels() {
+        let (dx, dy) = (u as f64 - e.cx, v as f64 - e.cy);
+        let (x, y) = (c * dx + s * dy, -s * dx + c * dy);
+        if (x / (e.a + 2.0)).powi(2) + (y / (e.b + 2.0)).powi(2) > 1.0 {
+            assert_eq!(p[0], sky.get_pixel(u, v)[0], "({u}, {v})");
+        }
+    }
+}
+
+/// A crescent's dark part lies inside the dark disc's exact ellipse and
+/// outside the covering disc's.
+#[test]
+fn crescent_is_the_dark_disc_minus_the_cover() {
+    let (mut cam, mut scene, _) = plain("approach");
+    cam.distortion = [0.0; 5];
+    let mut r = Renderer::new(&cam, {
+        let mut l = look();
+        l.haze = 0.0;
+        l
+    });
+    let centre = V3::new(-0.3, 0.1, 5.0);
+    let normal = V3::new(-0.2, 0.1, -1.0).normalize();
+    let e1 = crate::geometry::perpendicular(&normal);
+    let e2 = normal.cross(&e1);
+    scene.without_drogue = true;
+    scene.decals = Decal::crescent(centre, normal, e1, e2, 0.3, 0.0, 0.33, 0.2, 0.75).to_vec();
+    let img = r.render(&scene);
+    let inside = |c: &V3, radius: f64, u: f64, v: f64| {
+        let e = crate::conic::conic_to_ellipse(
+            &crate::conic::circle_image_conic(&cam, c, &normal, radius).unwrap(),
+        )
+        .unwrap();
+        let (s, co) = e.theta.sin_cos();
+        let (dx, dy) = (u - e.cx, v - e.cy);
+        let (x, y) = (co * dx + s * dy, -s * dx + co * dy);
+        (x / e.a).powi(2) + (y / e.b).powi(2)
+    };
+    let mut dark = 0;
+    for (u, v, p) in img.enumerate_pixels() {
+        if p[0] < 20 {
+            dark += 1;
+            let (u, v) = (u as f64, v as f64);
+            assert!(
+                inside(&centre, 0.3, u, v) < 1.0,
+                "dark ({u}, {v}) outside the disc"
+            );
+            assert!(
+                inside(&(centre + e1 * 0.2), 0.33, u, v) > 1.0,
+                "dark ({u}, {v}) under the cover"
+            );
+        }
+    }
+    assert!(dark > 500, "only {dark} dark pixels");
+}
+
+/// The glare streak saturates its centre line and leaves pixels a few widths
+/// away as they were; a scene without the extras renders as before.
+#[test]
+fn glare_streak_saturates_its_line_only() {
+    let (_, mut scene, mut r) = plain("approach");
+    let before = r.render(&scene);
+    scene.glare_streak = Some(GlareStreak {
+        through_px: [600.0, 400.0],
+        angle_rad: 0.5,
+        width_px: 10.0,
+        strength: 1.2,
+    });
+    let img = r.render(&scene);
+    let (s, c) = 0.5f64.sin_cos();
+    for (u, v, p) in img.enumerate_pixels() {
+        let d = ((u as f64 - 600.0) * -s + (v as f64 - 400.0) * c).abs();
+        if d < 0.5 {
+            assert_eq!(p[0], 255, "({u}, {v}) on the line");
+        } else if d > 25.0 {
+            assert_eq!(p[0], before.get_pixel(u, v)[0], "({u}, {v}) {d:.1} px off");
+        }
+    }
+    scene.glare_streak = None;
+    assert_eq!(r.render(&scene), before);
+}
+
+/// Without the drogue the frame is the sky: the same as a drogue far out
+/// of view.
+#[test]
+fn without_drogue_leaves_the_sky() {
+    let (_, mut scene, mut r) = plain("approach");
+    scene.without_drogue = true;
+    let empty = r.render(&scene);
+    scene.without_drogue = false;
+    scene.drogue.centre = V3::new(100.0, 0.0, 5.0);
+    assert_eq!(r.render(&scene), empty);
+}

@@ -1,0 +1,820 @@
+//! Randomised single frames for a robustness sweep: one factor at a time
+//! (haze, glare streak over the disc, motion blur, noise, exposure,
+//! vignetting, lens distortion, range, tilt, probe occlusion, distractors)
+//! and everything at once, plus drogue-free frames with look-alikes
+//! (crescents, canopy-less discs and rings, dark blobs and rectangles).
+//!
+//! Every frame is an unrelated view with a drogue at a random place in the
+//! field on top of a mild baseline (range 2-8 m, tilt 0-45 degrees, hose,
+//! light clouds, read noise 1.5 DN, vignetting 0.15), with the level's factor
+//! applied. It is deterministic for (seed, level, index): a regression shows
+//! as a change in the same frames. The truth (image ellipse, pose, mirror
+//! pose, rim shares) comes from the geometry through [`crate::conic`], never
+//! from the pixels.
+
+use crate::TruthEllipse;
+use crate::camera::SimCamera;
+use crate::conic::{circle_image_conic, conic_to_ellipse, mirror_pose};
+use crate::geometry::{V3, perpendicular, r_body_cam};
+use crate::render::{Decal, DecalShape, DrogueView, FrameScene, GlareStreak, Look, Renderer, Tube};
+use crate::simulator::MIN_VISIBLE_RIM;
+use image::GrayImage;
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use std::f64::consts::{PI, TAU};
+
+/// Radius of the dark inner circle, metres (the reference data's).
+pub const INNER_RADIUS_M: f64 = 0.15;
+/// Radius of the canopy's outer rim, metres.
+pub const CANOPY_RADIUS_M: f64 = 0.33;
+/// Rim points for the occlusion shares.
+const RIM_POINTS: usize = 360;
+
+/// What a sweep level varies.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Factor {
+    /// The baseline alone.
+    Baseline,
+    /// Haze (value: 0..1, the share of the haze radiance mixed in).
+    Haze,
+    /// A saturating sun-glare streak crossing the disc (value: its full
+    /// width at half maximum, pixels).
+    Glare,
+    /// Linear motion blur of the drogue (value: length, pixels).
+    Blur,
+    /// Sensor read noise (value: sigma, grey levels).
+    Noise,
+    /// Exposure gain (value: 1 = nominal).
+    Exposure,
+    /// Vignetting (value: relative fall-off at the corner).
+    Vignetting,
+    /// Barrel distortion (value: k1; k2 = -k1 / 3).
+    Distortion,
+    /// Range (value: metres), tilt 20 degrees.
+    Range,
+    /// Tilt (value: degrees), range 2.5-4 m.
+    Tilt,
+    /// The probe over a share of the inner rim (value: lower end of a
+    /// 10 % bin, 0..0.3), range 2.5-4 m.
+    Occlusion,
+    /// Dark blobs and rectangles around the drogue (value: how many).
+    Distractors,
+    /// Everything at once (like the reference `hard` sets).
+    Everything,
+    /// Drogue-free: a dark disc partly covered by a lighter one.
+    Crescent,
+    /// Drogue-free: a dark disc without a canopy.
+    CanopylessDisc,
+    /// Drogue-free: a dark ring without a canopy.
+    DarkRing,
+    /// Drogue-free: dark blobs and rectangles only.
+    DarkShapes,
+}
+
+impl Factor {
+    pub fn name(self) -> &'static str {
+        match self {
+            Factor::Baseline => "baseline",
+            Factor::Haze => "haze",
+            Factor::Glare => "glare streak",
+            Factor::Blur => "motion blur",
+            Factor::Noise => "noise",
+            Factor::Exposure => "exposure",
+            Factor::Vignetting => "vignetting",
+            Factor::Distortion => "distortion",
+            Factor::Range => "range",
+            Factor::Tilt => "tilt",
+            Factor::Occlusion => "probe occlusion",
+            Factor::Distractors => "distractors",
+            Factor::Everything => "everything",
+            Factor::Crescent => "no drogue: crescent",
+            Factor::CanopylessDisc => "no drogue: disc without canopy",
+            Factor::DarkRing => "no drogue: ring without canopy",
+            Factor::DarkShapes => "no drogue: dark blobs, rectangles",
+        }
+    }
+
+    /// Whether the level's frames show a drogue.
+    pub fn has_drogue(self) -> bool {
+        !matches!(
+            self,
+            Factor::Crescent | Factor::CanopylessDisc | Factor::DarkRing | Factor::DarkShapes
+        )
+    }
+}
+
+/// One row of the sweep: a factor at one setting.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Level {
+    pub factor: Factor,
+    pub value: f64,
+}
+
+impl Level {
+    pub const fn new(factor: Factor, value: f64) -> Level {
+        Level { factor, value }
+    }
+
+    /// The setting in words, e.g. `16 px`, `20-30 %`.
+    pub fn setting(&self) -> String {
+        let v = self.value;
+        match self.factor {
+            Factor::Haze => format!("{v:.1}"),
+            Factor::Glare => format!("{v:.0} px wide"),
+            Factor::Blur => format!("{v:.0} px"),
+            Factor::Noise => format!("sigma {v:.0}"),
+            Factor::Exposure => format!("gain {v:.1}"),
+            Factor::Vignetting => format!("{v:.1}"),
+            Factor::Distortion => format!("k1 {v:.2}"),
+            Factor::Range => format!("{v:.0} m"),
+            Factor::Tilt => format!("{v:.0} deg"),
+            Factor::Occlusion => format!("{:.0}-{:.0} %", v * 100.0, v * 100.0 + 10.0),
+            Factor::Distractors => format!("{v:.0}"),
+            _ => "-".into(),
+        }
+    }
+
+    /// `factor setting`, for tables and messages.
+    pub fn label(&self) -> String {
+        match self.setting().as_str() {
+            "-" => self.factor.name().to_string(),
+            s => format!("{} {s}", self.factor.name()),
+        }
+    }
+}
+
+/// The sweep's levels: each factor over its range, then everything at once,
+/// then the drogue-free kinds.
+pub fn standard_levels() -> Vec<Level> {
+    use Factor::*;
+    let mut levels = vec![Level::new(Baseline, 0.0)];
+    let mut add = |f: Factor, values: &[f64]| {
+        levels.extend(values.iter().map(|&v| Level::new(f, v)));
+    };
+    add(Haze, &[0.2, 0.4, 0.6]);
+    add(Glare, &[4.0, 12.0, 30.0]);
+    add(Blur, &[4.0, 8.0, 16.0, 32.0]);
+    add(Noise, &[2.0, 5.0, 10.0, 20.0]);
+    add(Exposure, &[0.4, 0.7, 1.3]);
+    add(Vignetting, &[0.4, 0.7]);
+    add(Distortion, &[-0.12, -0.25]);
+    add(Range, &[1.0, 2.0, 3.0, 5.0, 8.0, 12.0, 16.0]);
+    add(Tilt, &[0.0, 15.0, 30.0, 45.0, 60.0, 75.0]);
+    add(Occlusion, &[0.0, 0.1, 0.2, 0.3]);
+    add(Distractors, &[1.0, 3.0]);
+    add(Everything, &[0.0]);
+    add(Crescent, &[0.0]);
+    add(CanopylessDisc, &[0.0]);
+    add(DarkRing, &[0.0]);
+    add(DarkShapes, &[0.0]);
+    levels
+}
+
+/// The truth of a frame's drogue, camera frame (x right, y down, z forward).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct DrogueTruth {
+    /// Exact image ellipse of the inner circle, undistorted pixels.
+    pub ellipse: TruthEllipse,
+    pub position_camera: [f64; 3],
+    /// Unit normal toward the camera.
+    pub normal_camera: [f64; 3],
+    /// The mirror pose imaging to the same ellipse.
+    pub alt_position_camera: [f64; 3],
+    pub alt_normal_camera: [f64; 3],
+    pub range_m: f64,
+    pub tilt_deg: f64,
+    /// Share of the inner rim hidden by the probe, 0..1.
+    pub probe_rim_frac: f64,
+    /// Share of the inner rim visible (in the image, not hidden), 0..1.
+    pub visible_rim_frac: f64,
+    /// Enough of the rim is visible for a detection to be expected
+    /// (the simulator's own rule, [`MIN_VISIBLE_RIM`]).
+    pub expect_detect: bool,
+}
+
+/// One rendered sweep frame.
+#[derive(Clone, Debug)]
+pub struct SweepFrame {
+    pub level: Level,
+    pub index: u64,
+    /// The camera the frame was rendered through.
+    pub camera: SimCamera,
+    pub image: GrayImage,
+    /// `None` on drogue-free frames.
+    pub drogue: Option<DrogueTruth>,
+}
+
+/// Renders sweep frames; keeps one renderer per lens (the ray table is the
+/// expensive part of a renderer).
+pub struct Sweep {
+    seed: u64,
+    renderers: Vec<(SimCamera, Renderer)>,
+}
+
+/// The reference data's camera (the paper's 5 mm lens on 3.75 um pixels),
+/// with the given plumb_bob distortion.
+pub fn camera(distortion: [f64; 5]) -> SimCamera {
+    SimCamera {
+        width: 1280,
+        height: 960,
+        fx: 1336.2,
+        fy: 1335.4,
+        cx: 646.3,
+        cy: 473.8,
+        distortion,
+    }
+}
+
+/// splitmix64: decorrelates the per-frame seeds.
+fn mix(mut z: u64) -> u64 {
+    z = z.wrapping_add(0x9e37_79b9_7f4a_7c15);
+    z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+    z ^ (z >> 31)
+}
+
+/// Scene settings of one frame before it is laid out.
+#[derive(Clone, Debug)]
+struct Settings {
+    range_m: f64,
+    tilt_deg: f64,
+    gain: f64,
+    read_noise_dn: f64,
+    vignette: f64,
+    haze: f64,
+    blur_px: f64,
+    glare_width_px: Option<f64>,
+    probe_bin: Option<(f64, f64)>,
+    distractors: usize,
+    distortion: [f64; 5],
+}
+
+impl Sweep {
+    pub fn new(seed: u64) -> Sweep {
+        Sweep {
+            seed,
+            renderers: Vec::new(),
+        }
+    }
+
+    fn renderer(&mut self, distortion: [f64; 5], look: Look) -> (SimCamera, &mut Renderer) {
+        let i = match self
+            .renderers
+            .iter()
+            .position(|(c, _)| c.distortion == distortion)
+        {
+            Some(i) => i,
+            None => {
+                let cam = camera(distortion);
+                let r = Renderer::new(&cam, look.clone());
+                self.renderers.push((cam, r));
+                self.renderers.len() - 1
+            }
+        };
+        let (cam, r) = &mut self.renderers[i];
+        r.set_look(look);
+        (cam.clone(), r)
+    }
+
+    /// Frame `index` of `level`.
+    pub fn frame(&mut self, level: &Level, index: u64) -> SweepFrame {
+        let key = mix(self.seed
+            ^ mix(level.factor as u64 + 1)
+            ^ mix(level.value.to_bits()).rotate_left(17)
+            ^ mix(index).rotate_left(41));
+        let mut rng = ChaCha8Rng::seed_from_u64(key);
+        let s = settings(level, &mut rng);
+        let look = Look {
+            sky_zenith: 0.50,
+            sky_horizon: 0.68,
+            ground: 0.55,
+            cloud_cover: rng.random_range(0.0..0.6),
+            cloud_radiance: 0.85,
+            sun_ned: {
+                let (az, el) = (
+                    rng.random_range(0.0..TAU),
+                    rng.random_range(10f64..70.0).to_radians(),
+                );
+                V3::new(el.cos() * az.cos(), el.cos() * az.sin(), -el.sin())
+            },
+            glare: 0.0,
+            haze: s.haze,
+            haze_radiance: 0.75,
+            gain: s.gain,
+            read_noise_dn: s.read_noise_dn,
+            shot_noise_dn: 0.02,
+            vignette: s.vignette,
+            cloud_seed: rng.random(),
+        };
+        let r_ned_cam = r_body_cam(
+            rng.random_range(-15.0..15.0),
+            rng.random_range(-3.0..12.0),
+            rng.random_range(0.0..360.0),
+        );
+        let cam = camera(s.distortion);
+        let noise_seed = rng.random();
+        let mut scene = FrameScene {
+            drogue: placeholder_drogue(),
+            hose: None,
+            probe: None,
+            r_ned_cam,
+            blur_px: [0.0, 0.0],
+            noise_seed,
+            without_drogue: true,
+            decals: Vec::new(),
+            glare_streak: None,
+        };
+        let mut truth = None;
+        if level.factor.has_drogue() {
+            let (drogue, hose, probe, t) = lay_out_drogue(&cam, &s, &mut rng);
+            let centre_px = cam.project_px(&drogue.centre).unwrap_or([cam.cx, cam.cy]);
+            if let Some(width_px) = s.glare_width_px {
+                let a_px = t.ellipse.a;
+                let off = rng.random_range(-0.5..0.5) * a_px;
+                let angle = rng.random_range(0.0..PI);
+                scene.glare_streak = Some(GlareStreak {
+                    through_px: [
+                        centre_px[0] - angle.sin() * off,
+                        centre_px[1] + angle.cos() * off,
+                    ],
+                    angle_rad: angle,
+                    width_px,
+                    strength: rng.random_range(1.0..1.6),
+                });
+            }
+            let phi = rng.random_range(0.0..TAU);
+            scene.blur_px = [s.blur_px * phi.cos(), s.blur_px * phi.sin()];
+            scene.drogue = drogue;
+            scene.hose = Some(hose);
+            scene.probe = probe;
+            scene.without_drogue = false;
+            for _ in 0..s.distractors {
+                scene
+                    .decals
+                    .push(dark_shape(&cam, &mut rng, Some(centre_px)));
+            }
+            truth = Some(t);
+        } else {
+            scene.decals = look_alikes(level.factor, &cam, &mut rng);
+        }
+        let (camera, renderer) = self.renderer(s.distortion, look);
+        let image = renderer.render(&scene);
+        SweepFrame {
+            level: *level,
+            index,
+            camera,
+            image,
+            drogue: truth,
+        }
+    }
+}
+
+/// The baseline, with the level's factor applied.
+fn settings(level: &Level, rng: &mut ChaCha8Rng) -> Settings {
+    let mut s = Settings {
+        range_m: rng.random_range(2.0..8.0),
+        tilt_deg: rng.random_range(0.0..45.0),
+        gain: 1.0,
+        read_noise_dn: 1.5,
+        vignette: 0.15,
+        haze: 0.0,
+        blur_px: 0.0,
+        glare_width_px: None,
+        probe_bin: None,
+        distractors: 0,
+        distortion: [0.0; 5],
+    };
+    let v = level.value;
+    match level.factor {
+        Factor::Haze => s.haze = v,
+        Factor::Glare => s.glare_width_px = Some(v),
+        Factor::Blur => s.blur_px = v,
+        Factor::Noise => s.read_noise_dn = v,
+        Factor::Exposure => s.gain = v,
+        Factor::Vignetting => s.vignette = v,
+        Factor::Distortion => s.distortion = [v, -v / 3.0, 0.0, 0.0, 0.0],
+        Factor::Range => {
+            s.range_m = v;
+            s.tilt_deg = 20.0;
+        }
+        Factor::Tilt => {
+            s.range_m = rng.random_range(2.5..4.0);
+            s.tilt_deg = v;
+        }
+        Factor::Occlusion => {
+            s.range_m = rng.random_range(2.5..4.0);
+            s.probe_bin = Some((v, v + 0.1));
+        }
+        Factor::Distractors => s.distractors = v as usize,
+        Factor::Everything => {
+            s.distortion = [-0.25, 0.08, 0.0, 0.0, 0.0];
+            s.range_m = rng.random_range(2.0..10.0);
+            s.tilt_deg = rng.random_range(0.0..60.0);
+            s.read_noise_dn = rng.random_range(2.0..8.0);
+            s.gain = rng.random_range(0.4..1.3);
+            s.vignette = rng.random_range(0.1..0.5);
+            if rng.random_bool(0.5) {
+                s.haze = rng.random_range(0.3..0.6);
+            }
+            if rng.random_bool(0.5) {
+                s.blur_px = rng.random_range(3.0..15.0);
+            }
+            if rng.random_bool(0.5) {
+                s.glare_width_px = Some(rng.random_range(4.0..20.0));
+            }
+            if rng.random_bool(0.6) {
+                let lo = rng.random_range(0.03..0.2);
+                s.probe_bin = Some((lo, lo + 0.05));
+            }
+            if rng.random_bool(0.25) {
+                s.distractors = 1;
+            }
+        }
+        Factor::Baseline
+        | Factor::Crescent
+        | Factor::CanopylessDisc
+        | Factor::DarkRing
+        | Factor::DarkShapes => {}
+    }
+    s
+}
+
+/// A drogue view that is not drawn (drogue-free frames).
+fn placeholder_drogue() -> DrogueView {
+    DrogueView {
+        centre: V3::new(0.0, 0.0, 10.0),
+        normal: V3::new(0.0, 0.0, -1.0),
+        e1: V3::x(),
+        e2: V3::y(),
+        inner_radius: INNER_RADIUS_M,
+        canopy_radius: CANOPY_RADIUS_M,
+        rim_width: 0.018,
+        struts: 0,
+        strut_width: 0.0,
+        disc: 0.1,
+        canopy: 0.72,
+        rim: 0.38,
+        strut: 0.4,
+    }
+}
+
+/// A plane at `centre` tilted from facing the camera by `tilt` radians about
+/// a random axis, with a random in-plane turn: (normal toward the camera,
+/// e1, e2).
+fn random_plane(centre: &V3, tilt: f64, rng: &mut ChaCha8Rng) -> (V3, V3, V3) {
+    let los = -centre.normalize();
+    let p = perpendicular(&los);
+    let q = los.cross(&p);
+    let phi = rng.random_range(0.0..TAU);
+    let axis = p * phi.cos() + q * phi.sin();
+    let normal = (los * tilt.cos() + axis.cross(&los) * tilt.sin()).normalize();
+    let b = perpendicular(&normal);
+    let roll = rng.random_range(0.0..TAU);
+    let e1 = b * roll.cos() + normal.cross(&b) * roll.sin();
+    let e2 = normal.cross(&e1);
+    (normal, e1, e2)
+}
+
+/// A point at `range` metres along the ray of a random pixel at least
+/// `margin` pixels inside the frame (the centre when the margin leaves none).
+fn random_point(cam: &SimCamera, range: f64, margin: f64, rng: &mut ChaCha8Rng) -> V3 {
+    let pick = |rng: &mut ChaCha8Rng, size: u32, centre: f64| {
+        let (lo, hi) = (margin, size as f64 - 1.0 - margin);
+        if lo < hi {
+            rng.random_range(lo..hi)
+        } else {
+            centre
+        }
+    };
+    let u = pick(rng, cam.width, cam.cx);
+    let v = pick(rng, cam.height, cam.cy);
+    let ray = cam.ray_camera([u, v]).unwrap_or(V3::new(0.0, 0.0, 1.0));
+    ray.normalize() * range
+}
+
+/// Shares of the inner rim (circle of `radius` about `centre` in the plane
+/// e1, e2) hidden by the probe and visible: (probe, visible, all in image).
+fn rim_shares(
+    cam: &SimCamera,
+    centre: &V3,
+    e1: &V3,
+    e2: &V3,
+    radius: f64,
+    probe: Option<&Tube>,
+    hose: Option<&Tube>,
+) -> (f64, f64, bool) {
+    let (mut by_probe, mut visible, mut in_image) = (0usize, 0usize, 0usize);
+    for k in 0..RIM_POINTS {
+        let a = k as f64 * TAU / RIM_POINTS as f64;
+        let p = centre + (e1 * a.cos() + e2 * a.sin()) * radius;
+        if p.z <= 1e-6 {
+            continue;
+        }
+        let ray = p / p.z;
+        let hid_probe = probe.is_some_and(|t| t.occludes(&ray, p.z));
+        let hid_hose = hose.is_some_and(|t| t.occludes(&ray, p.z));
+        let inside = cam.project_px(&p).is_some_and(|q| cam.in_image(q));
+        by_probe += hid_probe as usize;
+        in_image += inside as usize;
+        visible += (inside && !hid_probe && !hid_hose) as usize;
+    }
+    let n = RIM_POINTS as f64;
+    (
+        by_probe as f64 / n,
+        visible as f64 / n,
+        in_image == RIM_POINTS,
+    )
+}
+
+/// The drogue, its hose, the probe (occlusion levels) and the truth.
+fn lay_out_drogue(
+    cam: &SimCamera,
+    s: &Settings,
+    rng: &mut ChaCha8Rng,
+) -> (DrogueView, Tube, Option<Tube>, DrogueTruth) {
+    let canopy_px = cam.fx * CANOPY_RADIUS_M / s.range_m;
+    let inner_px = cam.fx * INNER_RADIUS_M / s.range_m;
+    // The whole inner rim in the image (tried a few times, then the centre).
+    let mut centre = V3::new(0.0, 0.0, s.range_m);
+    let mut plane = random_plane(&centre, s.tilt_deg.to_radians(), rng);
+    for attempt in 0..20 {
+        let margin = if attempt < 19 {
+            (1.1 * canopy_px).max(2.0 * inner_px + 10.0)
+        } else {
+            f64::INFINITY
+        };
+        let c = random_point(cam, s.range_m, margin, rng);
+        let pl = random_plane(&c, s.tilt_deg.to_radians(), rng);
+        let (_, _, all_in) = rim_shares(cam, &c, &pl.1, &pl.2, INNER_RADIUS_M, None, None);
+        (centre, plane) = (c, pl);
+        if all_in {
+            break;
+        }
+    }
+    let (normal, e1, e2) = plane;
+    let drogue = DrogueView {
+        centre,
+        normal,
+        e1,
+        e2,
+        inner_radius: INNER_RADIUS_M,
+        canopy_radius: CANOPY_RADIUS_M,
+        rim_width: 0.018,
+        struts: 8,
+        strut_width: 0.018,
+        disc: 0.10,
+        canopy: 0.72,
+        rim: 0.38,
+        strut: 0.40,
+    };
+    // The hose leaves the coupling behind the disc, toward the tanker
+    // (ahead and above).
+    let hose = Tube {
+        a: centre - normal * 0.05,
+        b: centre
+            + V3::new(
+                rng.random_range(-3.0..3.0),
+                -rng.random_range(3.0..8.0),
+                rng.random_range(10.0..25.0),
+            ),
+        radius_a: 0.045,
+        radius_b: 0.045,
+        radiance: 0.09,
+    };
+    let probe = s
+        .probe_bin
+        .and_then(|bin| place_probe(cam, &drogue, &hose, bin, rng));
+    let (probe_frac, visible, _) = rim_shares(
+        cam,
+        &centre,
+        &e1,
+        &e2,
+        INNER_RADIUS_M,
+        probe.as_ref(),
+        Some(&hose),
+    );
+    let ellipse = circle_image_conic(cam, &centre, &normal, INNER_RADIUS_M)
+        .and_then(|c| conic_to_ellipse(&c))
+        .unwrap_or(TruthEllipse {
+            cx: f64::NAN,
+            cy: f64::NAN,
+            a: f64::NAN,
+            b: f64::NAN,
+            theta: f64::NAN,
+        });
+    let (alt_c, alt_n) =
+        mirror_pose(cam, &centre, &normal, INNER_RADIUS_M).unwrap_or((centre, normal));
+    let range = centre.norm();
+    let truth = DrogueTruth {
+        ellipse,
+        position_camera: centre.into(),
+        normal_camera: normal.into(),
+        alt_position_camera: alt_c.into(),
+        alt_normal_camera: alt_n.into(),
+        range_m: range,
+        tilt_deg: (normal.dot(&(-centre)) / range)
+            .clamp(-1.0, 1.0)
+            .acos()
+            .to_degrees(),
+        probe_rim_frac: probe_frac,
+        visible_rim_frac: visible,
+        expect_detect: visible >= MIN_VISIBLE_RIM && ellipse.a.is_finite(),
+    };
+    (drogue, hose, probe, truth)
+}
+
+/// A probe between the camera and the drogue hiding a share of the inner
+/// rim within `bin` (as near as the geometry allows): a tube at 45-70 % of
+/// the drogue's depth coming in from a random side, its tip just past the
+/// disc's centre line, moved sideways until the share is in the bin.
+fn place_probe(
+    cam: &SimCamera,
+    d: &DrogueView,
+    hose: &Tube,
+    bin: (f64, f64),
+    rng: &mut ChaCha8Rng,
+) -> Option<Tube> {
+    let target = rng.random_range(bin.0.max(0.02)..bin.1);
+    let c_hat = d.centre.normalize();
+    let (x, y) = (perpendicular(&c_hat), c_hat.cross(&perpendicular(&c_hat)));
+    let mut best: Option<(f64, Tube)> = None;
+    for _ in 0..8 {
+        let k = rng.random_range(0.45..0.7);
+        let psi = rng.random_range(0.0..TAU);
+        let dir = x * psi.cos() + y * psi.sin();
+        let side = c_hat.cross(&dir);
+        let tip_along = -rng.random_range(0.1..0.5) * d.inner_radius;
+        let reach = d.inner_radius + 0.25;
+        for step in 0..=80 {
+            let offset = -reach + 2.0 * reach * step as f64 / 80.0;
+            // Points at the drogue's depth scaled by k: same image position.
+            let at = |along: f64| (d.centre + side * offset + dir * along) * k;
+            let tube = Tube {
+                a: at(tip_along + 3.0),
+                b: at(tip_along),
+                radius_a: 0.06,
+                radius_b: 0.035,
+                radiance: 0.16,
+            };
+            let (frac, _, _) = rim_shares(
+                cam,
+                &d.centre,
+                &d.e1,
+                &d.e2,
+                d.inner_radius,
+                Some(&tube),
+                Some(hose),
+            );
+            let miss = (frac - target).abs();
+            if best.as_ref().is_none_or(|(m, _)| miss < *m) {
+                best = Some((miss, tube));
+            }
+        }
+        if best.as_ref().is_some_and(|(m, _)| *m < 0.01) {
+            break;
+        }
+    }
+    best.map(|(_, t)| t)
+}
+
+/// A dark blob or rectangle far behind the drogue, 15-120 px across, near
+/// `near_px` (within 350 px) half the time when given, else anywhere.
+fn dark_shape(cam: &SimCamera, rng: &mut ChaCha8Rng, near_px: Option<[f64; 2]>) -> Decal {
+    let depth = rng.random_range(15.0..80.0);
+    let size_px = rng.random_range(15.0..120.0);
+    let size_m = size_px * depth / cam.fx / 2.0;
+    let centre = match near_px {
+        Some(p) if rng.random_bool(0.5) => {
+            let (a, r) = (rng.random_range(0.0..TAU), rng.random_range(0.0..350.0));
+            let q = [
+                (p[0] + r * a.cos()).clamp(0.0, cam.width as f64 - 1.0),
+                (p[1] + r * a.sin()).clamp(0.0, cam.height as f64 - 1.0),
+            ];
+            cam.ray_camera(q).unwrap_or(V3::z()).normalize() * depth
+        }
+        _ => random_point(cam, depth, 0.0, rng),
+    };
+    let (normal, e1, e2) = random_plane(&centre, rng.random_range(0.0..0.7), rng);
+    let shape = if rng.random_bool(0.5) {
+        DecalShape::Blob {
+            radius: size_m,
+            wobble: rng.random_range(0.1..0.35),
+            phase: rng.random_range(0.0..TAU),
+        }
+    } else {
+        let aspect: f64 = rng.random_range(1.0..4.0);
+        DecalShape::Rect {
+            half_1: size_m,
+            half_2: size_m / aspect,
+        }
+    };
+    Decal {
+        centre,
+        normal,
+        e1,
+        e2,
+        shape,
+        radiance: rng.random_range(0.05..0.3),
+    }
+}
+
+/// The look-alikes of a drogue-free level.
+fn look_alikes(factor: Factor, cam: &SimCamera, rng: &mut ChaCha8Rng) -> Vec<Decal> {
+    let range = rng.random_range(2.0..10.0);
+    let tilt = rng.random_range(0.0f64..50.0).to_radians();
+    let radius = rng.random_range(0.1..0.35);
+    let margin = 2.5 * cam.fx * radius / range + 10.0;
+    let centre = random_point(cam, range, margin, rng);
+    let (normal, e1, e2) = random_plane(&centre, tilt, rng);
+    let dark = rng.random_range(0.05..0.2);
+    let shape = |shape: DecalShape| Decal {
+        centre,
+        normal,
+        e1,
+        e2,
+        shape,
+        radiance: dark,
+    };
+    match factor {
+        Factor::Crescent => Decal::crescent(
+            centre,
+            normal,
+            e1,
+            e2,
+            radius,
+            dark,
+            radius * rng.random_range(1.0..1.4),
+            radius * rng.random_range(0.5..1.3),
+            rng.random_range(0.55..0.8),
+        )
+        .to_vec(),
+        Factor::CanopylessDisc => vec![shape(DecalShape::Disc { radius })],
+        Factor::DarkRing => vec![shape(DecalShape::Ring {
+            inner: radius,
+            outer: radius * rng.random_range(1.3..2.2),
+        })],
+        _ => (0..rng.random_range(2..=4))
+            .map(|_| dark_shape(cam, rng, None))
+            .collect(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn frames_are_deterministic_and_levels_distinct() {
+        let mut a = Sweep::new(7);
+        let mut b = Sweep::new(7);
+        let level = Level::new(Factor::Everything, 0.0);
+        let (fa, fb) = (a.frame(&level, 3), b.frame(&level, 3));
+        assert_eq!(fa.image, fb.image);
+        assert_eq!(fa.drogue, fb.drogue);
+        let other = a.frame(&level, 4);
+        assert_ne!(fa.image, other.image);
+    }
+
+    #[test]
+    fn probe_levels_hide_their_share_of_the_rim() {
+        let mut sweep = Sweep::new(1);
+        for lo in [0.0, 0.1, 0.2, 0.3] {
+            for i in 0..3 {
+                let f = sweep.frame(&Level::new(Factor::Occlusion, lo), i);
+                let t = f.drogue.unwrap();
+                assert!(
+                    t.probe_rim_frac >= lo.max(0.02) - 0.015 && t.probe_rim_frac <= lo + 0.115,
+                    "bin {lo}: {}",
+                    t.probe_rim_frac
+                );
+                assert!(t.expect_detect);
+            }
+        }
+    }
+
+    #[test]
+    fn drogue_frames_have_the_rim_in_view_and_the_dark_disc_where_the_truth_says() {
+        let mut sweep = Sweep::new(2);
+        for level in standard_levels().iter().filter(|l| l.factor.has_drogue()) {
+            let f = sweep.frame(level, 0);
+            let t = f.drogue.unwrap();
+            assert!(t.expect_detect, "{}", level.label());
+            // The truth ellipse's centre (undistorted) back through the lens
+            // lands on a dark pixel when nothing covers it.
+            if matches!(
+                level.factor,
+                Factor::Baseline | Factor::Range | Factor::Tilt
+            ) {
+                let cam = &f.camera;
+                let (xn, yn) = (
+                    (t.ellipse.cx - cam.cx) / cam.fx,
+                    (t.ellipse.cy - cam.cy) / cam.fy,
+                );
+                let (xd, yd) = cam.distort_normalized(xn, yn);
+                let (u, v) = (cam.fx * xd + cam.cx, cam.fy * yd + cam.cy);
+                let g = f.image.get_pixel(u.round() as u32, v.round() as u32)[0];
+                assert!(g < 60, "{}: grey {g} at the disc centre", level.label());
+            }
+        }
+    }
+}

@@ -1,0 +1,214 @@
+//! The robustness sweep (issue 12): the project's own simulator renders
+//! randomised unrelated frames, one factor at a time and all together
+//! (`drogue_sim::sweep`), every frame is measured on its own and scored
+//! against the simulator's exact truth, and each level is held to the limits
+//! in [`LIMITS`]. The scenes come from a fixed seed, so the same frames are
+//! measured on every run and a regression in any level shows.
+//!
+//! The limits are the detector's measured figures (detection rate and false
+//! detections exactly; accuracy medians at 1.5 times the measured value plus
+//! a small floor): raise them as the detector improves. Print the table with
+//! `cargo run --release --example robustness_sweep`.
+
+mod sweep;
+
+use drogue_sim::sweep::standard_levels;
+use sweep::LevelStats;
+
+/// Frames per level (the example's default is the same).
+const FRAMES: u64 = 10;
+
+/// What one level must achieve. `None`: not checked (no detection expected,
+/// or none accurate enough to have a median).
+struct Limit {
+    /// `factor setting`, as `Level::label` gives it.
+    level: &'static str,
+    /// Smallest detection rate on frames with a drogue, percent.
+    min_detected_pct: Option<u32>,
+    /// Most false detections: any on drogue-free frames, and detections
+    /// more than 5 % of the range or 10 degrees (the answer given) off.
+    max_false: usize,
+    /// Largest medians over the other detections: ellipse centre error
+    /// (undistorted px), position error (% of range), normal error (deg).
+    max_centre_px: Option<f64>,
+    max_position_pct: Option<f64>,
+    max_normal_deg: Option<f64>,
+}
+
+const fn limit(
+    level: &'static str,
+    min_detected_pct: Option<u32>,
+    max_false: usize,
+    max_centre_px: Option<f64>,
+    max_position_pct: Option<f64>,
+    max_normal_deg: Option<f64>,
+) -> Limit {
+    Limit {
+        level,
+        min_detected_pct,
+        max_false,
+        max_centre_px,
+        max_position_pct,
+        max_normal_deg,
+    }
+}
+
+/// The limits, one row per level (seed `sweep::SEED`, `FRAMES` frames each),
+/// set from the detector of this commit. At 12-16 m the false detections are
+/// the unresolved answer's mirror half (`unresolved`: both solutions are
+/// reported, the first is scored).
+#[rustfmt::skip]
+const LIMITS: &[Limit] = &[
+    //    level                                  detected %  false  centre px     position %    normal deg
+    limit("baseline", Some(100), 0, Some(0.02), Some(0.052), Some(0.13)),
+    limit("haze 0.2", Some(100), 0, Some(0.02), Some(0.019), Some(0.22)),
+    limit("haze 0.4", Some(100), 2, Some(0.022), Some(0.019), Some(0.14)),
+    limit("haze 0.6", Some(70), 1, Some(0.016), Some(0.028), Some(0.1)),
+    limit("glare streak 4 px wide", Some(100), 1, Some(0.019), Some(0.034), Some(0.16)),
+    limit("glare streak 12 px wide", Some(80), 1, Some(0.017), Some(0.044), Some(0.13)),
+    limit("glare streak 30 px wide", Some(10), 0, Some(0.019), Some(0.04), Some(0.32)),
+    limit("motion blur 4 px", Some(100), 0, Some(0.02), Some(0.059), Some(0.67)),
+    limit("motion blur 8 px", Some(100), 2, Some(0.035), Some(0.094), Some(0.53)),
+    limit("motion blur 16 px", Some(20), 2, None, None, None),
+    limit("motion blur 32 px", Some(30), 3, None, None, None),
+    limit("noise sigma 2", Some(100), 0, Some(0.02), Some(0.056), Some(0.31)),
+    limit("noise sigma 5", Some(100), 0, Some(0.013), Some(0.034), Some(0.16)),
+    limit("noise sigma 10", Some(100), 0, Some(0.038), Some(0.04), Some(0.25)),
+    limit("noise sigma 20", Some(100), 0, Some(0.079), Some(0.113), Some(0.55)),
+    limit("exposure gain 0.4", Some(100), 0, Some(0.022), Some(0.023), Some(0.13)),
+    limit("exposure gain 0.7", Some(100), 0, Some(0.02), Some(0.032), Some(0.19)),
+    limit("exposure gain 1.3", Some(100), 0, Some(0.019), Some(0.031), Some(0.14)),
+    limit("vignetting 0.4", Some(100), 0, Some(0.017), Some(0.026), Some(0.16)),
+    limit("vignetting 0.7", Some(100), 0, Some(0.019), Some(0.025), Some(0.14)),
+    limit("distortion k1 -0.12", Some(100), 1, Some(0.028), Some(0.041), Some(0.17)),
+    limit("distortion k1 -0.25", Some(100), 0, Some(0.031), Some(0.028), Some(0.34)),
+    limit("range 1 m", Some(100), 0, Some(0.01), Some(0.008), Some(0.07)),
+    limit("range 2 m", Some(100), 0, Some(0.011), Some(0.011), Some(0.1)),
+    limit("range 3 m", Some(100), 0, Some(0.016), Some(0.019), Some(0.13)),
+    limit("range 5 m", Some(100), 0, Some(0.022), Some(0.026), Some(0.17)),
+    limit("range 8 m", Some(100), 0, Some(0.029), Some(0.043), Some(0.29)),
+    limit("range 12 m", Some(100), 6, Some(0.034), Some(0.071), Some(0.47)),
+    limit("range 16 m", Some(100), 5, Some(0.026), Some(0.329), Some(0.76)),
+    limit("tilt 0 deg", Some(100), 0, Some(0.014), Some(0.023), Some(1.96)),
+    limit("tilt 15 deg", Some(100), 0, Some(0.017), Some(0.028), Some(0.13)),
+    limit("tilt 30 deg", Some(100), 0, Some(0.02), Some(0.02), Some(0.08)),
+    limit("tilt 45 deg", Some(100), 0, Some(0.019), Some(0.019), Some(0.08)),
+    limit("tilt 60 deg", Some(100), 0, Some(0.02), Some(0.034), Some(0.08)),
+    limit("tilt 75 deg", Some(100), 0, Some(0.028), Some(0.083), Some(0.08)),
+    limit("probe occlusion 0-10 %", Some(100), 0, Some(0.056), Some(0.031), Some(0.25)),
+    limit("probe occlusion 10-20 %", Some(100), 0, Some(0.029), Some(0.029), Some(0.17)),
+    limit("probe occlusion 20-30 %", Some(100), 0, Some(0.041), Some(0.044), Some(0.31)),
+    limit("probe occlusion 30-40 %", Some(100), 0, Some(0.044), Some(0.05), Some(0.37)),
+    limit("distractors 1", Some(100), 0, Some(0.013), Some(0.029), Some(0.17)),
+    limit("distractors 3", Some(100), 0, Some(0.017), Some(0.023), Some(0.17)),
+    limit("everything", Some(40), 1, Some(0.053), Some(0.02), Some(0.34)),
+    limit("no drogue: crescent", None, 0, None, None, None),
+    limit("no drogue: disc without canopy", None, 0, None, None, None),
+    limit("no drogue: ring without canopy", None, 1, None, None, None),
+    limit("no drogue: dark blobs, rectangles", None, 2, None, None, None),
+];
+
+fn check(stats: &LevelStats, limit: &Limit) -> Vec<String> {
+    let mut failures = Vec::new();
+    let name = &limit.level;
+    if let Some(min) = limit.min_detected_pct {
+        let rate = 100.0 * stats.detection_rate();
+        // NaN (nothing expected) fails too.
+        if rate.is_nan() || rate + 1e-9 < f64::from(min) {
+            failures.push(format!("{name}: detected {rate:.0} % < {min} %"));
+        }
+    }
+    if stats.false_detections > limit.max_false {
+        failures.push(format!(
+            "{name}: {} false detections > {}",
+            stats.false_detections, limit.max_false
+        ));
+    }
+    let medians = [
+        ("centre px", stats.centre_px_median(), limit.max_centre_px),
+        (
+            "position % of range",
+            stats.position_pct_median(),
+            limit.max_position_pct,
+        ),
+        (
+            "normal deg",
+            stats.normal_deg_median(),
+            limit.max_normal_deg,
+        ),
+    ];
+    for (what, median, max) in medians {
+        if let Some(max) = max
+            && (median.is_nan() || median > max)
+        {
+            failures.push(format!("{name}: {what} median {median:.3} > {max}"));
+        }
+    }
+    failures
+}
+
+#[test]
+fn robustness_sweep_meets_its_limits() {
+    let levels = standard_levels();
+    let stats = sweep::run(&levels, FRAMES, sweep::SEED, None);
+    eprintln!("{}", sweep::markdown(&stats));
+    let mut failures = Vec::new();
+    for s in &stats {
+        match LIMITS.iter().find(|l| l.level == s.label()) {
+            Some(limit) => failures.extend(check(s, limit)),
+            None => failures.push(format!("{}: no limit in LIMITS", s.label())),
+        }
+    }
+    for l in LIMITS {
+        if !stats.iter().any(|s| s.label() == l.level) {
+            failures.push(format!(
+                "{}: a limit for a level the sweep has not",
+                l.level
+            ));
+        }
+    }
+    assert!(failures.is_empty(), "{}", failures.join("\n"));
+}
+
+/// The scoring itself: truth and measurement meet in the same (undistorted)
+/// pixels, also through a strongly distorting lens; a drogue-free level
+/// expects nothing; and the limits catch a level that gets worse.
+#[test]
+fn scoring_and_limits_count_what_they_should() {
+    let levels = standard_levels();
+    let pick = |label: &str| *levels.iter().find(|l| l.label() == label).unwrap();
+    let stats = sweep::run(
+        &[pick("baseline"), pick("distortion k1 -0.25")],
+        3,
+        sweep::SEED,
+        None,
+    );
+    for s in &stats {
+        assert_eq!((s.frames, s.expected), (3, 3), "{}", s.label());
+        assert!(
+            !s.centre_px.is_empty(),
+            "{}: no accurate detection",
+            s.label()
+        );
+        assert!(
+            s.centre_px.iter().all(|&c| c < 0.5),
+            "{}: centre errors {:?}",
+            s.label(),
+            s.centre_px
+        );
+    }
+    let free = sweep::run(&[pick("no drogue: crescent")], 2, sweep::SEED, None);
+    assert_eq!(free[0].expected, 0);
+    assert!(free[0].detection_rate().is_nan());
+
+    let limit = LIMITS.iter().find(|l| l.level == "baseline").unwrap();
+    let mut worse = stats[0].clone();
+    worse.expected = 10;
+    worse.detected = 9;
+    worse.false_detections = limit.max_false + 1;
+    worse.centre_px = vec![1.0];
+    worse.position_rel = vec![0.0];
+    worse.normal_deg = vec![0.0];
+    let failures = check(&worse, limit);
+    assert_eq!(failures.len(), 3, "{failures:?}");
+}
