@@ -227,5 +227,51 @@ fn bench(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, bench);
+/// One simulator frame (the `approach` scenario at 10 s) encoded for
+/// `/camera/image`: raw copy, the log's PNG ([`GrayPngEncoder`]), and the png
+/// crate's fast mode with the same filter, for comparison. Prints the sizes.
+fn frame_encoding(c: &mut Criterion) {
+    use drogue_sim::{Scenario, Simulator};
+    use drogue_vision::log::png_gray::GrayPngEncoder;
+    use image::ImageEncoder;
+    use image::codecs::png::{CompressionType, FilterType, PngEncoder};
+    use std::hint::black_box;
+    let mut sim = Simulator::new(Scenario::builtin("approach").unwrap()).unwrap();
+    let (gray, _) = sim.nth(300).unwrap();
+    let (w, h) = gray.dimensions();
+    let raw = gray.as_raw().clone();
+    let mut enc = GrayPngEncoder::default();
+    let mut out = Vec::new();
+    enc.encode(&raw, w, h, &mut out).unwrap();
+    let mut crate_png = Vec::new();
+    PngEncoder::new_with_quality(&mut crate_png, CompressionType::Fast, FilterType::Avg)
+        .write_image(&raw, w, h, image::ExtendedColorType::L8)
+        .unwrap();
+    println!(
+        "simulator frame {w}x{h}: raw {} B, log PNG {} B ({:.2}x), png crate fast+avg {} B ({:.2}x)",
+        raw.len(),
+        out.len(),
+        raw.len() as f64 / out.len() as f64,
+        crate_png.len(),
+        raw.len() as f64 / crate_png.len() as f64
+    );
+    let mut group = c.benchmark_group("frame_encoding_1280x960");
+    group.throughput(Throughput::Elements(1));
+    group.bench_function("raw_copy", |b| b.iter(|| black_box(raw.clone())));
+    group.bench_function("log_png", |b| {
+        b.iter(|| enc.encode(black_box(&raw), w, h, &mut out).unwrap())
+    });
+    group.bench_function("png_crate_fast_avg", |b| {
+        b.iter(|| {
+            let mut v = Vec::with_capacity(raw.len());
+            PngEncoder::new_with_quality(&mut v, CompressionType::Fast, FilterType::Avg)
+                .write_image(black_box(&raw), w, h, image::ExtendedColorType::L8)
+                .unwrap();
+            v
+        })
+    });
+    group.finish();
+}
+
+criterion_group!(benches, bench, frame_encoding);
 criterion_main!(benches);

@@ -121,14 +121,7 @@ fn main() -> ExitCode {
         },
         Command::Recover(args) => match commands::recover::run(&args) {
             Ok((out, r)) => {
-                eprintln!(
-                    "wrote {}: {} messages{}",
-                    out.display(),
-                    r.messages,
-                    r.cut
-                        .map(|c| format!(" (the input was cut short: {c})"))
-                        .unwrap_or_else(|| " (the input was complete)".into())
-                );
+                eprintln!("wrote {}: {r}", out.display());
                 ExitCode::SUCCESS
             }
             Err(e) => log_error_exit(e),

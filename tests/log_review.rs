@@ -125,8 +125,10 @@ fn review_counts_rates_latencies_link_and_errors_by_range() {
     assert_eq!(z, s::centre_camera_m(1).z);
 
     for name in [
-        "position.png",
+        "position_body.png",
+        "position_camera.png",
         "detections.png",
+        "error_vs_time.png",
         "error_vs_range.png",
         "latency.png",
     ] {

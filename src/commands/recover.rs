@@ -1,5 +1,5 @@
 //! `drogue-vision recover LOG.mcap [--out FIXED.mcap]`: rewrites a cut-short
-//! log into a complete, indexed one.
+//! or damaged log into a complete, indexed one ([`crate::log::recover`]).
 
 use crate::log::LogError;
 use crate::log::recover::{RecoverReport, recover};
@@ -8,9 +8,12 @@ use std::path::{Path, PathBuf};
 /// Arguments of `recover`.
 #[derive(Clone, Debug, clap::Args)]
 #[command(
-    after_help = "Copies every message up to the cut (all complete chunks) into a new \
-file with its summary and index. The input is never changed. Exit status: 0 recovered; \
-1 the output could not be written; 2 the input is not an MCAP log."
+    after_help = "Copies every message the input still holds (every complete chunk; \
+the readable records of a chunk whose CRC fails, reported as DAMAGED and recorded in \
+the copy's metadata) into a new zstd-compressed file with its summary and index. The \
+input is never changed; the output appears only when complete. Exit status: 0 \
+recovered; 1 the output could not be written, or it would hold fewer messages than the \
+input yields (refused, nothing written); 2 the input is not an MCAP log."
 )]
 pub struct RecoverArgs {
     /// The cut-short MCAP log.
@@ -27,11 +30,6 @@ pub fn default_out(log: &Path) -> PathBuf {
 
 pub fn run(args: &RecoverArgs) -> Result<(PathBuf, RecoverReport), LogError> {
     let out = args.out.clone().unwrap_or_else(|| default_out(&args.log));
-    if out == args.log {
-        return Err(LogError::Config(
-            "--out must differ from the input (the input is kept as it is)".into(),
-        ));
-    }
     let report = recover(&args.log, &out)?;
     Ok((out, report))
 }

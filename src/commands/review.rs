@@ -7,10 +7,11 @@ use std::path::{Path, PathBuf};
 /// Arguments of `review`.
 #[derive(Clone, Debug, clap::Args)]
 #[command(
-    after_help = "Writes DIR/poses.csv and PNG plots (position.png, detections.png, \
-error_vs_range.png when the log has /sim/truth, latency.png). Exit status: 0 reviewed \
-(a cut-short log is reviewed up to the cut and says so); 1 the outputs could not be \
-written; 2 the log could not be read."
+    after_help = "Writes DIR/poses.csv, DIR/metadata.txt and PNG plots (position_body.png, \
+position_camera.png, detections.png, latency.png; error_vs_time.png and \
+error_vs_range.png when the log has /sim/truth). DIR appears only when complete. Exit \
+status: 0 reviewed (a cut-short or damaged log is reviewed up to the problem and says \
+so); 1 the outputs could not be written; 2 the log could not be read."
 )]
 pub struct ReviewArgs {
     /// The MCAP log to review.

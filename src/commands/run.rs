@@ -404,6 +404,18 @@ fn choose_camera(
     CameraModel::load(&file).map_err(|e| RunError::Setup(e.to_string()))
 }
 
+/// The camera file [`choose_camera`] used, for the log's metadata.
+fn camera_file_used(source: &dyn FrameSource, args: &RunArgs, config: &Config) -> String {
+    if source.camera().is_some() {
+        return "(the source's own camera, in /camera/calibration)".into();
+    }
+    args.camera
+        .clone()
+        .unwrap_or_else(|| config.camera.file.clone())
+        .display()
+        .to_string()
+}
+
 /// A stop request from SIGINT / SIGTERM.
 fn watch_signals(rt: &tokio::runtime::Runtime, stop: Arc<AtomicBool>) {
     rt.spawn(async move {
@@ -546,6 +558,21 @@ pub fn run(
     let log = FlightLog::start(&config.log, &log_dir, &camera)
         .map_err(|e| RunError::Setup(e.to_string()))?;
     log_layer_sink(&log);
+    log.metadata(
+        crate::log::metadata::RUN_METADATA,
+        crate::log::metadata::run_metadata(
+            &config,
+            &crate::log::metadata::RunProvenance {
+                source: spec_text.clone(),
+                source_details: frames_in.source().provenance(),
+                camera_file: camera_file_used(frames_in.source(), args, &config),
+                mavlink: args
+                    .mavlink
+                    .clone()
+                    .unwrap_or_else(|| config.link.connection.clone()),
+            },
+        ),
+    );
     tracing::info!(
         source = %spec_text,
         mavlink = %args.mavlink.as_deref().unwrap_or(&config.link.connection),

@@ -2,6 +2,7 @@
 //! built: Foxglove protobuf messages, and JSON for our own records.
 
 use super::ImageEncoding;
+use super::png_gray::GrayPngEncoder;
 use crate::camera::CameraModel;
 use crate::frame::Frame;
 use crate::measure::mount::Mount;
@@ -90,8 +91,13 @@ pub fn timestamp(ns: u64) -> Timestamp {
     Timestamp::new(sec, (ns % 1_000_000_000) as u32)
 }
 
-/// `/camera/image`: the frame, lossless.
-pub fn image(frame: &Frame, encoding: ImageEncoding, buf: &mut Vec<u8>) -> Result<(), String> {
+/// `/camera/image`: the frame, lossless (`png` reuses the buffers of `png`).
+pub fn image(
+    frame: &Frame,
+    encoding: ImageEncoding,
+    png: &mut GrayPngEncoder,
+    buf: &mut Vec<u8>,
+) -> Result<(), String> {
     let (width, height) = frame.image.dimensions();
     let ts = Some(timestamp(frame.capture_time_ns));
     match encoding {
@@ -108,33 +114,19 @@ pub fn image(frame: &Frame, encoding: ImageEncoding, buf: &mut Vec<u8>) -> Resul
             buf,
         ),
         ImageEncoding::Png => {
-            let png = png_fast(&frame.image)?;
+            let mut data = Vec::new();
+            png.encode(frame.image.as_raw(), width, height, &mut data)?;
             encode(
                 &CompressedImage {
                     timestamp: ts,
                     frame_id: CAMERA_FRAME.into(),
-                    data: png.into(),
+                    data: data.into(),
                     format: "png".into(),
                 },
                 buf,
             )
         }
     }
-}
-
-fn png_fast(img: &image::GrayImage) -> Result<Vec<u8>, String> {
-    use image::ImageEncoder;
-    use image::codecs::png::{CompressionType, FilterType, PngEncoder};
-    let mut out = Vec::with_capacity(img.as_raw().len() / 2);
-    PngEncoder::new_with_quality(&mut out, CompressionType::Fast, FilterType::Sub)
-        .write_image(
-            img.as_raw(),
-            img.width(),
-            img.height(),
-            image::ExtendedColorType::L8,
-        )
-        .map_err(|e| format!("PNG encoding: {e}"))?;
-    Ok(out)
 }
 
 /// `/camera/calibration` of the camera model (ROS camera_info conventions).

@@ -67,6 +67,10 @@ pub(crate) struct Writer {
     /// The first file's exact path (`process --log OUT.mcap`); later parts
     /// are `<stem>_<part>.mcap` beside it.
     exact_path: Option<PathBuf>,
+    /// Metadata records for every file of the run.
+    metadata: Vec<mcap::records::Metadata>,
+    /// PNG encoder buffers, reused frame to frame.
+    png: super::png_gray::GrayPngEncoder,
 }
 
 impl Writer {
@@ -99,6 +103,8 @@ impl Writer {
             last_drop_report: None,
             send_stamps: SendStamps::default(),
             exact_path: None,
+            metadata: Vec::new(),
+            png: Default::default(),
         }
     }
 
@@ -137,11 +143,20 @@ impl Writer {
             .create(path)
             .map_err(|e| super::error_chain(&e))?;
         let options = mcap::WriteOptions::new()
-            .compression(None)
+            .compression(self.cfg.compression.to_mcap())
+            .compression_level(self.cfg.compression_level)
+            // Compress on this (background) thread only: the pipeline's
+            // cores are not the log's.
+            .compression_threads(0)
             .profile("")
             .library(concat!("drogue-vision ", env!("CARGO_PKG_VERSION")))
             .chunk_size(Some(self.cfg.chunk_size_kib.saturating_mul(1024)));
-        let mcap = match mcap::Writer::with_options(writer, options) {
+        let mcap = match mcap::Writer::with_options(writer, options).and_then(|mut m| {
+            for record in &self.metadata {
+                m.write_metadata(record)?;
+            }
+            Ok(m)
+        }) {
             Ok(m) => m,
             Err(e) => {
                 // Not even the header fits: leave no empty file behind.
@@ -219,6 +234,7 @@ impl Writer {
             Item::Link(e) => self.link(&e),
             Item::Log(e) => self.write_log_event(&e),
             Item::Stats(record) => self.stats(&record),
+            Item::Metadata(record) => self.write_metadata(*record),
             Item::Finish(_) => {}
         }
     }
@@ -227,7 +243,7 @@ impl Writer {
         let t = frame.capture_time_ns;
         let seq = frame.seq;
         let mut buf = std::mem::take(&mut self.buf);
-        match topics::image(frame, self.cfg.image_encoding, &mut buf) {
+        match topics::image(frame, self.cfg.image_encoding, &mut self.png, &mut buf) {
             Ok(()) => {
                 if self.write(topics::IMAGE, seq, t, t, &buf) {
                     self.summary.frames += 1;
@@ -285,6 +301,21 @@ impl Writer {
             self.write_json(topics::DETECTION, r.seq, t, t, &r.json, &mut buf);
         }
         self.buf = buf;
+    }
+
+    /// Writes a metadata record now and into every later part.
+    fn write_metadata(&mut self, record: mcap::records::Metadata) {
+        if self.ensure_file()
+            && let Some(file) = self.file.as_mut()
+            && let Err(e) = file.mcap.write_metadata(&record)
+        {
+            let path = file.path.display().to_string();
+            self.fail(format!(
+                "writing metadata to {path}: {}",
+                super::error_chain(&e)
+            ));
+        }
+        self.metadata.push(record);
     }
 
     fn stats(&mut self, record: &serde_json::Value) {

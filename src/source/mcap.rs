@@ -8,6 +8,7 @@ use std::path::Path;
 
 /// Reads a log's frames back with their recorded capture times.
 pub struct McapSource {
+    path: std::path::PathBuf,
     reader: ReplayReader,
     camera: CameraModel,
 }
@@ -19,6 +20,7 @@ impl McapSource {
             message: e.to_string(),
         };
         Ok(Self {
+            path: path.to_path_buf(),
             camera: ReplayReader::first_camera(path).map_err(open_err)?,
             reader: replay::open(path).map_err(open_err)?,
         })
@@ -37,6 +39,9 @@ impl FrameSource for McapSource {
     }
     fn recorded_timeline(&self) -> bool {
         true
+    }
+    fn provenance(&self) -> Vec<(String, String)> {
+        vec![("replayed_log".to_string(), self.path.display().to_string())]
     }
     fn next_frame(&mut self) -> Option<SourceItem> {
         self.reader.next().map(|r| r.map_err(|e| e.to_string()))

@@ -85,6 +85,11 @@ pub trait FrameSource: Send {
     fn live(&self) -> bool {
         false
     }
+    /// What the flight log's metadata records about this source (key,
+    /// value): the scenario and seed of a simulation, the replayed log.
+    fn provenance(&self) -> Vec<(String, String)> {
+        Vec::new()
+    }
     /// The next frame; `None` at the end of the source.
     fn next_frame(&mut self) -> Option<SourceItem>;
 }

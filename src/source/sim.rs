@@ -240,6 +240,17 @@ impl FrameSource for SimSource {
     fn camera(&self) -> Option<CameraModel> {
         Some(self.camera.clone())
     }
+    fn provenance(&self) -> Vec<(String, String)> {
+        let scenario = self.sim.scenario();
+        let mut out = vec![
+            ("scenario".to_string(), scenario.name.clone()),
+            ("seed".to_string(), scenario.seed.to_string()),
+        ];
+        if let Ok(text) = toml::to_string(scenario) {
+            out.push(("scenario_toml".to_string(), text));
+        }
+        out
+    }
     fn mount(&self) -> Option<MountConfig> {
         Some(self.mount.clone())
     }

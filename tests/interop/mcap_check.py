@@ -5,9 +5,13 @@
     mcap_check.py LOG.mcap [LOG.mcap ...]           complete, indexed logs
     mcap_check.py --cut LOG.mcap                    a log cut short by a crash
     mcap_check.py --require /camera/image,/tf LOG   other required topics
+    mcap_check.py --compression zstd LOG            every chunk zstd (or lz4, none)
+    mcap_check.py --metadata drogue_vision.run LOG  this metadata record is present
 
 Every message of every topic is decoded: protobuf ones with their embedded
-schema (which must be a foxglove.* schema), JSON ones with json. A complete log
+schema (which must be a foxglove.* schema), JSON ones with json; PNG frames
+are inflated with Python's own zlib (chunk CRCs checked, size and filter
+bytes of every row). A complete log
 must open through its summary/index and its message counts must match the
 summary's statistics. A --cut log is streamed up to the cut. Exit status 0 only
 if every check passed.
@@ -15,7 +19,9 @@ if every check passed.
 import argparse
 import json
 import math
+import struct
 import sys
+import zlib
 
 from mcap.exceptions import McapError
 from mcap.reader import make_reader
@@ -91,6 +97,10 @@ class Checker:
         elif name == "foxglove.CompressedImage":
             if obj.format != "png" or not obj.data.startswith(PNG_SIGNATURE):
                 self.fail(f"{topic}: CompressedImage is not PNG ({obj.format})")
+            else:
+                problem = check_png(bytes(obj.data))
+                if problem:
+                    self.fail(f"{topic}: PNG: {problem}")
             self.frame_order(topic, message)
         elif name == "foxglove.CameraCalibration":
             if len(obj.K) != 9 or obj.K[0] <= 0 or obj.width < 1:
@@ -118,11 +128,54 @@ class Checker:
         self.last_frame_time = message.log_time
 
 
-def check_complete(path, required):
+def check_png(data):
+    """Inflates a gray PNG with zlib: chunk CRCs, row count and length, filter
+    bytes. Returns what is wrong, or None."""
+    pos, idat, ihdr = len(PNG_SIGNATURE), [], None
+    while pos + 8 <= len(data):
+        (length,) = struct.unpack(">I", data[pos:pos + 4])
+        kind = data[pos + 4:pos + 8]
+        body = data[pos + 8:pos + 8 + length]
+        (crc,) = struct.unpack(">I", data[pos + 8 + length:pos + 12 + length])
+        if zlib.crc32(kind + body) != crc:
+            return f"bad CRC in {kind!r}"
+        if kind == b"IHDR":
+            ihdr = struct.unpack(">IIBBBBB", body)
+        elif kind == b"IDAT":
+            idat.append(body)
+        elif kind == b"IEND":
+            break
+        pos += 12 + length
+    if ihdr is None:
+        return "no IHDR"
+    width, height, depth, colour = ihdr[:4]
+    if (depth, colour) != (8, 0):
+        return f"not 8-bit gray: depth {depth} colour type {colour}"
+    try:
+        raw = zlib.decompress(b"".join(idat))
+    except zlib.error as e:
+        return f"zlib: {e}"
+    if len(raw) != height * (width + 1):
+        return f"{len(raw)} bytes inflated, {height * (width + 1)} expected"
+    if any(raw[r * (width + 1)] > 4 for r in range(height)):
+        return "a row has an invalid filter type"
+    return None
+
+
+def check_complete(path, required, compression=None, metadata=()):
     c = Checker(path)
     with open(path, "rb") as f:
         reader = make_reader(f)
         summary = reader.get_summary()
+        if compression is not None and summary is not None:
+            want = "" if compression == "none" else compression
+            found = {ci.compression for ci in summary.chunk_indexes}
+            if found != {want}:
+                c.fail(f"chunk compression {sorted(found)}, expected {want!r}")
+        names = {m.name for m in reader.iter_metadata()}
+        for name in metadata:
+            if name not in names:
+                c.fail(f"no metadata record {name} (found {sorted(names)})")
         if summary is None or summary.statistics is None:
             c.fail("no summary section (not a complete, indexed file)")
         elif not summary.chunk_indexes:
@@ -182,12 +235,20 @@ def main():
     ap.add_argument("--cut", action="store_true", help="the logs were cut short by a crash")
     ap.add_argument("--require", default=",".join(DEFAULT_REQUIRED),
                     help="comma-separated topics that must have messages ('' for none)")
+    ap.add_argument("--compression", choices=["zstd", "lz4", "none"],
+                    help="every chunk must be compressed so")
+    ap.add_argument("--metadata", default="",
+                    help="comma-separated metadata record names that must be present")
     args = ap.parse_args()
     required = [t for t in args.require.split(",") if t]
+    metadata = [t for t in args.metadata.split(",") if t]
     failed = False
     for path in args.logs:
         try:
-            c = check_cut(path, required) if args.cut else check_complete(path, required)
+            if args.cut:
+                c = check_cut(path, required)
+            else:
+                c = check_complete(path, required, args.compression, metadata)
             failed |= bool(c.failures)
         except Exception as e:  # noqa: BLE001 - report, never crash silently
             print(f"FAIL {path}: {type(e).__name__}: {e}", file=sys.stderr)

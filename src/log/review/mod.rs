@@ -5,7 +5,7 @@
 mod plots;
 mod stats;
 
-use super::recover::message_reader;
+use super::recover::{is_cut_short, message_reader};
 use super::{LogError, topics};
 use foxglove::Decode;
 use foxglove::messages::Log;
@@ -48,6 +48,8 @@ struct TruthLite {
     position_camera: [f64; 3],
     normal_camera: [f64; 3],
     range_m: f64,
+    /// Absent in logs of older simulators.
+    position_body: Option<[f64; 3]>,
 }
 
 #[derive(Deserialize)]
@@ -109,8 +111,12 @@ pub(crate) struct PlotPoint {
     pub detected: bool,
     pub position_camera: [f64; 3],
     pub truth_camera: [f64; 3],
+    /// Body FRD: what the autopilot receives.
+    pub position_body: [f64; 3],
+    pub truth_body: [f64; 3],
     pub range_m: f64,
     pub position_error_m: f64,
+    pub normal_error_deg: f64,
 }
 
 /// Everything the review found.
@@ -119,6 +125,10 @@ pub struct ReviewReport {
     pub log: PathBuf,
     /// Why reading stopped early (a cut-short log), if it did.
     pub cut: Option<String>,
+    /// Why reading stopped at damage (a chunk CRC, a bad record), if it did.
+    pub damaged: Option<String>,
+    /// The log's MCAP metadata records (name, key/values), in file order.
+    pub metadata: Vec<(String, BTreeMap<String, String>)>,
     /// Log time span of all messages, ns.
     pub first_ns: Option<u64>,
     pub last_ns: Option<u64>,
@@ -186,9 +196,66 @@ truth_position_camera_x_m,truth_position_camera_y_m,truth_position_camera_z_m,\
 truth_normal_camera_x,truth_normal_camera_y,truth_normal_camera_z,\
 truth_range_m,position_error_m,normal_error_deg";
 
-/// Reviews `log`, writing `poses.csv` and the plots into `out_dir`.
+/// Reviews `log`, writing `poses.csv`, the plots and the metadata into
+/// `out_dir`. Everything is written to a temporary folder beside `out_dir`
+/// and moved into place at the end, so a failure leaves no half-written
+/// folder. An existing `out_dir` is replaced only when it is empty or an
+/// earlier review (it holds `poses.csv`).
 pub fn review(log: &Path, out_dir: &Path) -> Result<ReviewReport, LogError> {
-    std::fs::create_dir_all(out_dir).map_err(|e| LogError::io(out_dir, e))?;
+    if out_dir.exists() {
+        let earlier_review = out_dir.join("poses.csv").is_file();
+        let empty = std::fs::read_dir(out_dir)
+            .map(|mut d| d.next().is_none())
+            .unwrap_or(false);
+        if !(earlier_review || empty) {
+            return Err(LogError::Config(format!(
+                "{} exists and is not an earlier review: choose another --out",
+                out_dir.display()
+            )));
+        }
+    }
+    let parent = out_dir
+        .parent()
+        .filter(|p| !p.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
+    std::fs::create_dir_all(parent).map_err(|e| LogError::io(parent, e))?;
+    let tmp = tempfile::Builder::new()
+        .prefix(".review-")
+        .tempdir_in(parent)
+        .map_err(|e| LogError::io(parent, e))?;
+    let mut r = review_into(log, tmp.path())?;
+    // Move into place: the old review aside, the new one in, the old one gone.
+    let old = if out_dir.exists() {
+        let aside = tempfile::Builder::new()
+            .prefix(".review-old-")
+            .tempdir_in(parent)
+            .map_err(|e| LogError::io(parent, e))?;
+        let aside_path = aside.path().join("old");
+        std::fs::rename(out_dir, &aside_path).map_err(|e| LogError::io(out_dir, e))?;
+        Some(aside)
+    } else {
+        None
+    };
+    let tmp_path = tmp.keep();
+    if let Err(e) = std::fs::rename(&tmp_path, out_dir) {
+        let _ = std::fs::remove_dir_all(&tmp_path);
+        if let Some(old) = &old {
+            let _ = std::fs::rename(old.path().join("old"), out_dir);
+        }
+        return Err(LogError::io(out_dir, e));
+    }
+    drop(old);
+    for f in &mut r.files_written {
+        if let Ok(rest) = f.strip_prefix(&tmp_path) {
+            *f = out_dir.join(rest);
+        }
+    }
+    Ok(r)
+}
+
+/// The review, written into the folder `out_dir` (which exists).
+fn review_into(log: &Path, out_dir: &Path) -> Result<ReviewReport, LogError> {
+    let metadata = super::metadata::read_metadata(log)?;
     let csv_path = out_dir.join("poses.csv");
     let csv_file = File::create(&csv_path).map_err(|e| LogError::io(&csv_path, e))?;
     let mut csv = BufWriter::new(csv_file);
@@ -197,6 +264,7 @@ pub fn review(log: &Path, out_dir: &Path) -> Result<ReviewReport, LogError> {
 
     let mut r = ReviewReport {
         log: log.to_path_buf(),
+        metadata,
         by_range: stats::range_bins(),
         ..Default::default()
     };
@@ -216,7 +284,11 @@ pub fn review(log: &Path, out_dir: &Path) -> Result<ReviewReport, LogError> {
                 if r.first_ns.is_none() && matches!(e, mcap::McapError::BadMagic) {
                     return Err(LogError::format(log, e));
                 }
-                r.cut = Some(e.to_string());
+                if is_cut_short(&e) {
+                    r.cut = Some(super::error_chain(&e));
+                } else {
+                    r.damaged = Some(super::error_chain(&e));
+                }
                 break;
             }
         };
@@ -306,8 +378,11 @@ pub fn review(log: &Path, out_dir: &Path) -> Result<ReviewReport, LogError> {
                         detected: d.detected,
                         position_camera: d.position_camera.unwrap_or([f64::NAN; 3]),
                         truth_camera: truth.map_or([f64::NAN; 3], |x| x.position_camera),
+                        position_body: d.position_body.unwrap_or([f64::NAN; 3]),
+                        truth_body: truth.and_then(|x| x.position_body).unwrap_or([f64::NAN; 3]),
                         range_m: truth.map_or(f64::NAN, |x| x.range_m),
                         position_error_m: pos_err.unwrap_or(f64::NAN),
+                        normal_error_deg: normal_err.unwrap_or(f64::NAN),
                     });
                     if r.series.len() >= MAX_PLOT_POINTS {
                         let mut i = 0;
@@ -399,6 +474,18 @@ pub fn review(log: &Path, out_dir: &Path) -> Result<ReviewReport, LogError> {
     }
     csv.flush().map_err(csv_err)?;
     r.files_written.push(csv_path);
+    if !r.metadata.is_empty() {
+        let path = out_dir.join("metadata.txt");
+        let mut text = String::new();
+        for (name, values) in &r.metadata {
+            text.push_str(&format!("[{name}]\n"));
+            for (k, v) in values {
+                text.push_str(&format!("--- {k}\n{v}\n"));
+            }
+        }
+        std::fs::write(&path, text).map_err(|e| LogError::io(&path, e))?;
+        r.files_written.push(path);
+    }
     match plots::draw_all(&r, out_dir) {
         Ok(files) => r.files_written.extend(files),
         Err(e) => r.plot_error = Some(e),
@@ -450,6 +537,23 @@ impl fmt::Display for ReviewReport {
                 f,
                 "           CUT SHORT, read up to: {c} (drogue-vision recover fixes the file)"
             )?;
+        }
+        if let Some(d) = &self.damaged {
+            writeln!(
+                f,
+                "           DAMAGED, read up to: {d} (drogue-vision recover salvages the rest \
+                 and says what is lost)"
+            )?;
+        }
+        for (name, values) in &self.metadata {
+            writeln!(f, "metadata   {name}")?;
+            for (k, v) in values {
+                // Long values (the config as TOML) are in metadata.txt.
+                match v.lines().count() {
+                    0 | 1 => writeln!(f, "             {k}: {v}")?,
+                    n => writeln!(f, "             {k}: {n} lines, in metadata.txt")?,
+                }
+            }
         }
         writeln!(f, "duration   {:.1} s", self.duration_s())?;
         writeln!(
