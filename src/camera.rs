@@ -119,6 +119,20 @@ impl CameraModel {
         })
     }
 
+    /// Refuses frames of another size than the calibration's: intrinsics are
+    /// in pixels of one image size, and frames of another would give wrong
+    /// poses (every source checks, not only V4L2). The message has both sizes.
+    pub fn check_frame_size(&self, width: u32, height: u32) -> Result<(), String> {
+        if (width, height) == (self.width, self.height) {
+            return Ok(());
+        }
+        Err(format!(
+            "the frames are {width}x{height} but the camera calibration `{}` is for \
+             {}x{}: use the calibration made at the frames' size",
+            self.name, self.width, self.height
+        ))
+    }
+
     /// Reads a camera file (ROS camera_info YAML or OpenCV FileStorage YAML).
     pub fn load(path: &Path) -> Result<Self, CameraError> {
         let file = path.display().to_string();

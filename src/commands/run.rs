@@ -38,10 +38,12 @@ pub struct RunArgs {
     /// Frame source: sim:SCENARIO_NAME_OR_FILE, dir:PATH, mcap:PATH, v4l:/dev/videoN.
     #[arg(long)]
     pub source: Option<String>,
-    /// Camera file for sources that do not carry their own (dir:, v4l:).
+    /// Camera file; overrides the source's own (mcap:, sim:), required for
+    /// dir: and v4l: without `[camera] file`. Its size must be the frames'.
     #[arg(long)]
     pub camera: Option<PathBuf>,
-    /// MAVLink connection: udpout:HOST:PORT, udpin:HOST:PORT, tcpout:HOST:PORT, serial:DEVICE:BAUD.
+    /// MAVLink connection: udpout:HOST:PORT, udpin:HOST:PORT (= udp:), udpbcast:BCAST:PORT,
+    /// tcpout:HOST:PORT (= tcp:), tcpin:HOST:PORT, serial:DEVICE:BAUD.
     #[arg(long)]
     pub mavlink: Option<String>,
     /// Folder of the MCAP log (default from the config: logs/).
@@ -381,21 +383,21 @@ fn open_source(spec: &SourceSpec, config: &Config) -> Result<Box<dyn FrameSource
     })
 }
 
-/// The camera: the source's own, else `--camera`, else `[camera] file`.
+/// The camera: `--camera` (the user's word wins, even over a log's or a
+/// scenario's own), else the source's own, else `[camera] file`.
 fn choose_camera(
     source: &dyn FrameSource,
     args: &RunArgs,
     config: &Config,
 ) -> Result<CameraModel, RunError> {
+    if let Some(file) = &args.camera {
+        return CameraModel::load(file).map_err(|e| RunError::Setup(e.to_string()));
+    }
     if let Some(c) = source.camera() {
         return Ok(c);
     }
-    let file = args
-        .camera
-        .clone()
-        .or_else(|| {
-            (!config.camera.file.as_os_str().is_empty()).then(|| config.camera.file.clone())
-        })
+    let file = (!config.camera.file.as_os_str().is_empty())
+        .then(|| config.camera.file.clone())
         .ok_or_else(|| {
             RunError::Setup(
                 "this source has no camera of its own: give --camera or [camera] file".into(),
@@ -522,6 +524,17 @@ pub fn run(
     }
     let mut frames_in = open_frames(&spec, vehicle_pose, args, &config)?;
     let camera = choose_camera(frames_in.source(), args, &config)?;
+    // The first frame is read before anything starts (link, log files): a
+    // calibration of another size is refused with exit status 2.
+    let mut first_item = match &mut frames_in {
+        Frames::Source(source) => source.next_frame(),
+        Frames::ClosedLoop(_) => None,
+    };
+    if let Some(Ok(first)) = &first_item {
+        camera
+            .check_frame_size(first.image.width(), first.image.height())
+            .map_err(RunError::Setup)?;
+    }
     let mut config = config;
     if let Some(m) = frames_in.source().mount() {
         config.mount = m;
@@ -632,6 +645,7 @@ pub fn run(
         // The source's own CPU (rendering, decoding) is counted apart from
         // the pipeline's.
         let item = meters.time_source(|| match &mut frames_in {
+            Frames::Source(_) if first_item.is_some() => first_item.take(),
             Frames::Source(source) => source.next_frame(),
             // Rendered [run] vehicle_pose_delay_ms after its capture, from
             // the autopilot's pose at the capture.
@@ -653,6 +667,11 @@ pub fn run(
                 continue;
             }
         };
+        if let Err(e) = camera.check_frame_size(frame.image.width(), frame.image.height()) {
+            unreadable += 1;
+            tracing::warn!(seq = frame.seq, "frame skipped: {e}");
+            continue;
+        }
         if paced && matches!(frames_in, Frames::Source(_)) {
             frame.capture_time_ns = pacer.wait_until_due(frame.capture_time_ns, frame.seq);
         }
@@ -726,6 +745,33 @@ pub fn run(
     Ok(summary)
 }
 
+/// The link's end-of-run line: what was sent, and the autopilot's
+/// heartbeat as it was (never heard is not "0 losses"; a link that never
+/// opened says so).
+fn link_report(l: &crate::link::LinkStats) -> String {
+    if !l.opened {
+        return format!(
+            "\nlink: never opened ({} failed attempts, see the warnings above); nothing sent",
+            l.io_errors
+        );
+    }
+    let sent: Vec<String> = l.sent.iter().map(|(k, v)| format!("{v} {k}")).collect();
+    let sent = if sent.is_empty() {
+        "nothing".to_string()
+    } else {
+        sent.join(", ")
+    };
+    let heartbeat = if l.autopilot_heard() {
+        format!("{} autopilot heartbeat losses", l.heartbeat_losses)
+    } else {
+        "autopilot heartbeat never heard".to_string()
+    };
+    format!(
+        "\nlink: sent {sent}; {} stale poses not sent; {heartbeat}, {} reconnects",
+        l.stale, l.reconnects
+    )
+}
+
 impl RunSummary {
     /// The end-of-run lines on stderr.
     pub fn report(&self) -> String {
@@ -739,16 +785,7 @@ impl RunSummary {
             .iter()
             .map(|p| p.display().to_string())
             .collect();
-        let link_line = self.link.as_ref().map_or_else(String::new, |l| {
-            let sent: Vec<String> = l.sent.iter().map(|(k, v)| format!("{v} {k}")).collect();
-            format!(
-                "\nlink: sent {}; {} stale poses not sent; {} autopilot heartbeat losses, {} reconnects",
-                sent.join(", "),
-                l.stale,
-                l.heartbeat_losses,
-                l.reconnects
-            )
-        });
+        let link_line = self.link.as_ref().map_or_else(String::new, link_report);
         let held = if self.vehicle_pose_held > 0 {
             format!(
                 ", {} rendered with a held autopilot pose (stale)",

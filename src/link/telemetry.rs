@@ -29,6 +29,8 @@ const MAX_SAMPLES: usize = 256;
 /// A jump of the clock offset beyond this is a reboot or a new clock: restart.
 const OFFSET_JUMP_NS: i64 = 1_000_000_000;
 const SYNC_WINDOW: usize = 8;
+/// Replies to our own TIMESYNC requests before the offset counts as converged.
+pub const CONVERGED_REPLIES: usize = 4;
 
 /// Estimates autopilot clock minus our clock, ns.
 #[derive(Default)]
@@ -85,6 +87,19 @@ impl TimeSync {
             self.one_way.pop_front();
         }
         self.one_way.push_back(offset);
+    }
+
+    /// The offset once our own requests have had [`CONVERGED_REPLIES`]
+    /// answers in the window (the one-way estimate from the autopilot's
+    /// requests is off by the link latency and does not count).
+    pub fn converged_offset_ns(&self) -> Option<i64> {
+        if self.replies.len() < CONVERGED_REPLIES {
+            return None;
+        }
+        self.replies
+            .iter()
+            .min_by_key(|(rtt, _)| *rtt)
+            .map(|&(_, offset)| offset)
     }
 
     /// Autopilot clock minus our clock, ns, if known.
@@ -207,19 +222,26 @@ impl Telemetry {
         self.position.push(t, v);
     }
 
+    /// The attitude (body → NED) at `t` (ns, Unix), as [`Telemetry::pose_at`]
+    /// finds it, without needing a position.
+    pub fn attitude_at(&self, t: u64) -> Option<UnitQuaternion<f64>> {
+        match self.attitude.around(t, self.tolerance_ns) {
+            (Some(a), Some(b)) => Some(
+                a.value
+                    .try_slerp(&b.value, fraction(t, a.time_ns, b.time_ns), 1e-9)
+                    .unwrap_or(a.value),
+            ),
+            (Some(a), None) | (None, Some(a)) => Some(a.value),
+            (None, None) => None,
+        }
+    }
+
     /// Attitude and position at `t` (ns, Unix): interpolated between the
     /// samples around it (slerp for the attitude), or the nearest one, as long
     /// as they are within the tolerance; `None` otherwise.
     pub fn pose_at(&self, t: u64) -> Option<VehiclePose> {
         let tol = self.tolerance_ns;
-        let q = match self.attitude.around(t, tol) {
-            (Some(a), Some(b)) => a
-                .value
-                .try_slerp(&b.value, fraction(t, a.time_ns, b.time_ns), 1e-9)
-                .unwrap_or(a.value),
-            (Some(a), None) | (None, Some(a)) => a.value,
-            (None, None) => return None,
-        };
+        let q = self.attitude_at(t)?;
         let p = match self.position.around(t, tol) {
             (Some(a), Some(b)) => a.value.lerp(&b.value, fraction(t, a.time_ns, b.time_ns)),
             (Some(a), None) | (None, Some(a)) => a.value,
