@@ -3,6 +3,7 @@
 //! waits on the log and the link always gets the newest measurement.
 
 use super::run_stats::{PipelineMeters, ResourceSummary, StatsThread};
+use super::run_status::{StatusReporter, Vitals};
 use crate::camera::CameraModel;
 use crate::config::{Config, SitlAnchor, VehiclePoseSource};
 use crate::frame::Frame;
@@ -452,11 +453,11 @@ fn spawn_measurement(
     mount: Mount,
     link: LinkHandle,
     log: LogHandle,
-    counts: (Arc<Mutex<RunSummary>>, Arc<PipelineMeters>),
+    counts: (Arc<Mutex<RunSummary>>, Arc<PipelineMeters>, Arc<Vitals>),
     handed_to_link: Option<std::sync::mpsc::Sender<u64>>,
     realtime_priority: u8,
 ) -> (SyncSender<Arc<Frame>>, std::thread::JoinHandle<()>) {
-    let (counts, meters) = counts;
+    let (counts, meters, vitals) = counts;
     // Capacity 1: at most one frame waits; a newer one finding it full is
     // skipped for measurement (still logged), so latency never builds up.
     let (tx, rx) = sync_channel::<Arc<Frame>>(1);
@@ -479,6 +480,11 @@ fn spawn_measurement(
             if let Ok(mut c) = counts.lock() {
                 c.measured += 1;
                 c.detected += u64::from(m.detection.is_some());
+            }
+            vitals.measured.fetch_add(1, Ordering::Relaxed);
+            if let Some(d) = &m.detection {
+                vitals.detected.fetch_add(1, Ordering::Relaxed);
+                vitals.set_range_m(d.position_body_m.norm());
             }
             log.measurement(m, record, &mount);
             meters.frame_measured();
@@ -574,6 +580,8 @@ pub fn run(
     // send latency of each frame's first pose message is counted on the way.
     let events = link.events();
     let event_log = log.clone();
+    let vitals = Arc::new(Vitals::default());
+    let event_vitals = Arc::clone(&vitals);
     let events_done = Arc::new(AtomicBool::new(false));
     let events_done_flag = Arc::clone(&events_done);
     let event_thread = std::thread::spawn(move || {
@@ -586,7 +594,9 @@ pub fn run(
                         && last_sent_capture != Some(captured)
                     {
                         last_sent_capture = Some(captured);
-                        latency_ms.add(ev.time_ns.saturating_sub(captured) as f64 * 1e-6);
+                        let ms = ev.time_ns.saturating_sub(captured) as f64 * 1e-6;
+                        latency_ms.add(ms);
+                        event_vitals.set_latency_ms(ms.max(1e-6));
                     }
                     event_log.mavlink(ev);
                 }
@@ -612,7 +622,11 @@ pub fn run(
         mount,
         link.clone(),
         log.clone(),
-        (Arc::clone(&counts), Arc::clone(&meters)),
+        (
+            Arc::clone(&counts),
+            Arc::clone(&meters),
+            Arc::clone(&vitals),
+        ),
         yield_to_measurement.then_some(handed_tx),
         config.run.realtime_priority,
     );
@@ -635,6 +649,7 @@ pub fn run(
         Frames::Source(_) => true,
     };
     let paced = frames_in.source().recorded_timeline() && !args.fast;
+    let status = StatusReporter::spawn(Arc::clone(&vitals), link.clone(), log_dir.clone());
     // This thread takes each frame from the source (a camera's dequeue, the
     // pacer's wake-up at a frame's due time) and hands it on.
     realtime_if_asked("capture", priority);
@@ -659,6 +674,7 @@ pub fn run(
         };
         frames += 1;
         meters.frames_in.fetch_add(1, Ordering::Relaxed);
+        vitals.frames.fetch_add(1, Ordering::Relaxed);
         let mut frame = match item {
             Ok(f) => f,
             Err(e) => {
@@ -707,6 +723,7 @@ pub fn run(
     };
     drop(frame_tx);
     let _ = measure_thread.join();
+    status.finish();
     link.shutdown();
     events_done.store(true, Ordering::SeqCst);
     let latency_ms = event_thread.join().unwrap_or_default();

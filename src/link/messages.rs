@@ -630,6 +630,64 @@ mod tests {
     }
 
     #[test]
+    fn target_relative_in_body_then_in_offset_ned() {
+        let p = Vector3::new(6.0, 0.5, -0.3);
+        let det = detection(p, Vector3::new(-1.0, 0.0, 0.0));
+        let m = measurement(det.clone());
+        let pose = DroguePose::new(&det).unwrap();
+        let mut inputs = TargetRelativeInputs {
+            q_ned_body: None,
+            autopilot_offset_ns: None,
+            std_scale: 1.0,
+            std_floor_m: 0.0,
+        };
+        // No attitude: body FRD, q_sensor zero (ignored by the receiver).
+        let dev::MavMessage::TARGET_RELATIVE(b) =
+            target_relative(&m, &pose, &det, &inputs).unwrap()
+        else {
+            panic!("not TARGET_RELATIVE");
+        };
+        assert_eq!(b.frame, dev::TargetObsFrame::TARGET_OBS_FRAME_BODY_FRD);
+        assert_eq!((b.x, b.y, b.z), (6.0, 0.5, -0.3));
+        assert_eq!(b.timestamp, 1_700_000_000_123_456);
+        // The test detection's covariance is diag(1e-4, 4e-6, 9e-6) m^2.
+        let want = [1e-2f32, 2e-3, 3e-3];
+        for (got, want) in b.pos_std.iter().zip(want) {
+            assert!((got - want).abs() < 1e-7, "{:?}", b.pos_std);
+        }
+        assert!((b.yaw_std - 0.01).abs() < 1e-7);
+        assert_eq!(b.q_sensor, [0.0; 4]);
+        assert_eq!(b.q_target, [1.0, 0.0, 0.0, 0.0]);
+
+        // Yawed 90 degrees east: forward -> east, right -> south; the
+        // covariance's axes swap with it. Scale 2, floor 5 mm; clock offset.
+        let yaw90 = UnitQuaternion::from_euler_angles(0.0, 0.0, std::f64::consts::FRAC_PI_2);
+        inputs.q_ned_body = Some(yaw90);
+        inputs.std_scale = 2.0;
+        inputs.std_floor_m = 0.005;
+        inputs.autopilot_offset_ns = Some(-1_699_000_000_000_000_000);
+        let dev::MavMessage::TARGET_RELATIVE(n) =
+            target_relative(&m, &pose, &det, &inputs).unwrap()
+        else {
+            panic!("not TARGET_RELATIVE");
+        };
+        assert_eq!(
+            n.frame,
+            dev::TargetObsFrame::TARGET_OBS_FRAME_LOCAL_OFFSET_NED
+        );
+        assert!((n.x + 0.5).abs() < 1e-5 && (n.y - 6.0).abs() < 1e-5 && (n.z + 0.3).abs() < 1e-5);
+        let want = [0.005f32, 0.02, 0.006]; // north: max(2 * 2 mm, 5 mm); east: 2 * 10 mm
+        for (got, want) in n.pos_std.iter().zip(want) {
+            assert!((got - want).abs() < 1e-6, "{:?}", n.pos_std);
+        }
+        assert_eq!(n.q_sensor, [1.0, 0.0, 0.0, 0.0]);
+        // 1_700_000_000_123_456_789 ns - 1_699_000_000_000_000_000 ns, in µs.
+        assert_eq!(n.timestamp, 1_000_000_123_456);
+        let h = std::f32::consts::FRAC_1_SQRT_2;
+        assert!((n.q_target[0] - h).abs() < 1e-6 && (n.q_target[3] - h).abs() < 1e-6);
+    }
+
+    #[test]
     fn degenerate_detections_are_refused() {
         let mut det = detection(Vector3::new(0.0, 0.0, 0.0), Vector3::new(-1.0, 0.0, 0.0));
         assert!(DroguePose::new(&det).is_none());

@@ -303,6 +303,15 @@ mod tests {
         assert!(ts.reply(t1 + off + MS as i64, t1, t1 + 2 * MS as i64));
         // The shorter round trip wins: exact offset.
         assert_eq!(ts.offset_ns(), Some(off));
+        // Two replies are not yet a converged exchange; four are.
+        assert_eq!(ts.converged_offset_ns(), None);
+        let mut converged = TimeSync::default();
+        for k in 0..CONVERGED_REPLIES as i64 {
+            let t = unix0 + k * 1000 * MS as i64;
+            converged.request_sent(t);
+            assert!(converged.reply(t + off + MS as i64, t, t + 2 * MS as i64));
+        }
+        assert_eq!(converged.converged_offset_ns(), Some(off));
         // A reply to someone else's request is ignored.
         assert!(!ts.reply(123, 456, t1));
 
