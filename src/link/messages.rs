@@ -40,8 +40,8 @@
 //! - TARGET_RELATIVE (`target_relative`, id 511, MAVLink `development`
 //!   dialect, for PX4's vision_target_estimator): the drogue centre relative
 //!   to the vehicle. With the vehicle attitude at the capture time (ATTITUDE
-//!   on the link): frame TARGET_OBS_FRAME_LOCAL_OFFSET_NED, x y z = R_ned_body
-//!   * body xyz, q_target = q_ned_drogue, q_sensor = identity (the frame
+//!   on the link): frame TARGET_OBS_FRAME_LOCAL_OFFSET_NED, x y z =
+//!   R_ned_body times body xyz, q_target = q_ned_drogue, q_sensor = identity (the frame
 //!   already is vehicle-carried NED). Without it: TARGET_OBS_FRAME_BODY_FRD,
 //!   x y z = body xyz, q_target = q_body_drogue, q_sensor = 0 (ignored: the
 //!   autopilot rotates with its own attitude at the timestamp). The camera
