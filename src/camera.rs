@@ -8,14 +8,30 @@ use nalgebra::{Matrix2, Matrix3, Vector2, Vector3};
 use serde_yaml::Value;
 use std::path::Path;
 
-/// A camera file that could not be used; names the file and the field.
-#[derive(Debug, thiserror::Error)]
-#[error("camera file {file}: {field}: {message}")]
+/// A camera file that could not be used; names the file and, when one is
+/// to blame, the field (empty: the file as a whole, unreadable or not YAML).
+#[derive(Debug)]
 pub struct CameraError {
     pub file: String,
     pub field: String,
     pub message: String,
 }
+
+impl std::fmt::Display for CameraError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        if self.field.is_empty() {
+            write!(f, "camera file {}: {}", self.file, self.message)
+        } else {
+            write!(
+                f,
+                "camera file {}: {}: {}",
+                self.file, self.field, self.message
+            )
+        }
+    }
+}
+
+impl std::error::Error for CameraError {}
 
 /// Intrinsics and plumb_bob distortion of one camera.
 #[derive(Clone, Debug, PartialEq)]
@@ -119,20 +135,33 @@ impl CameraModel {
         })
     }
 
+    /// Refuses frames of another size than the calibration's: intrinsics are
+    /// in pixels of one image size, and frames of another would give wrong
+    /// poses (every source checks, not only V4L2). The message has both sizes.
+    pub fn check_frame_size(&self, width: u32, height: u32) -> Result<(), String> {
+        if (width, height) == (self.width, self.height) {
+            return Ok(());
+        }
+        Err(format!(
+            "the frames are {width}x{height} but the camera calibration `{}` is for \
+             {}x{}: use the calibration made at the frames' size",
+            self.name, self.width, self.height
+        ))
+    }
+
     /// Reads a camera file (ROS camera_info YAML or OpenCV FileStorage YAML).
     pub fn load(path: &Path) -> Result<Self, CameraError> {
         let file = path.display().to_string();
-        let text =
-            std::fs::read_to_string(path).map_err(|e| err(&file, "(file)", e.to_string()))?;
+        let text = std::fs::read_to_string(path).map_err(|e| err(&file, "", e.to_string()))?;
         Self::from_yaml_str(&text, &file)
     }
 
     /// Parses camera YAML text; `file` names it in errors.
     pub fn from_yaml_str(text: &str, file: &str) -> Result<Self, CameraError> {
         let root: Value = serde_yaml::from_str(&plain_yaml(text))
-            .map_err(|e| err(file, "(yaml)", e.to_string()))?;
+            .map_err(|e| err(file, "", format!("not YAML: {e}")))?;
         if !root.is_mapping() {
-            return Err(err(file, "(yaml)", "expected a mapping of camera fields"));
+            return Err(err(file, "", "expected a mapping of camera fields"));
         }
         let width = dimension(&root, "image_width", file)?;
         let height = dimension(&root, "image_height", file)?;

@@ -30,8 +30,50 @@ enum Command {
     Review(commands::review::ReviewArgs),
     /// Rewrite a cut-short MCAP log into a complete, indexed one.
     Recover(commands::recover::RecoverArgs),
-    /// Render a simulated scenario to PNG frames, truth.jsonl and camera.yaml.
+    /// Render a simulated scenario to PNG frames, truth.jsonl, camera.yaml and mount.toml.
     Sim(commands::sim::SimArgs),
+    /// Print a shell completion script to stdout.
+    #[command(after_help = "bash: drogue-vision completions bash > \
+/etc/bash_completion.d/drogue-vision; zsh: drogue-vision completions zsh > \
+\"${fpath[1]}/_drogue-vision\"; fish: drogue-vision completions fish > \
+~/.config/fish/completions/drogue-vision.fish. Exit status: 0.")]
+    Completions {
+        /// The shell.
+        #[arg(value_enum)]
+        shell: clap_complete::Shell,
+    },
+    /// Print the man page (roff) to stdout, or write one page per command to --dir.
+    #[command(after_help = "man <(drogue-vision man), or: drogue-vision man --dir \
+/usr/local/share/man/man1 (drogue-vision.1, drogue-vision-run.1, ...). Exit status: 0 done; \
+1 the pages could not be written.")]
+    Man {
+        /// Folder for drogue-vision.1 and one page per subcommand.
+        #[arg(long)]
+        dir: Option<std::path::PathBuf>,
+    },
+}
+
+/// Prints the completion script for `shell`.
+fn completions(shell: clap_complete::Shell) -> ExitCode {
+    let mut cmd = <Cli as clap::CommandFactory>::command();
+    clap_complete::generate(shell, &mut cmd, "drogue-vision", &mut std::io::stdout());
+    ExitCode::SUCCESS
+}
+
+/// The man pages: the top one to stdout, or every page into `dir`.
+fn man(dir: Option<&std::path::Path>) -> ExitCode {
+    let cmd = <Cli as clap::CommandFactory>::command();
+    let result = match dir {
+        None => clap_mangen::Man::new(cmd).render(&mut std::io::stdout()),
+        Some(dir) => std::fs::create_dir_all(dir).and_then(|()| clap_mangen::generate_to(cmd, dir)),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: writing the man page: {e}");
+            ExitCode::from(1)
+        }
+    }
 }
 
 /// Where `run` plugs the MCAP `/log` layer in once the log is open.
@@ -44,7 +86,11 @@ fn init_tracing() -> LogSlot {
     let filter = EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new("info"));
     tracing_subscriber::registry()
         .with(slot)
-        .with(tracing_subscriber::fmt::layer().with_writer(std::io::stderr))
+        .with(
+            tracing_subscriber::fmt::layer()
+                .with_writer(commands::run_status::StderrWriter::new())
+                .with_ansi(commands::run_status::colour_allowed()),
+        )
         .with(filter)
         .init();
     handle
@@ -126,6 +172,8 @@ fn main() -> ExitCode {
             }
             Err(e) => log_error_exit(e),
         },
+        Command::Completions { shell } => completions(shell),
+        Command::Man { dir } => man(dir.as_deref()),
         Command::Sim(args) => match commands::sim::run(&args) {
             Ok(s) => {
                 eprintln!(

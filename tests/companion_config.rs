@@ -131,3 +131,41 @@ fn run_with_the_companion_config_reports_the_camera_clearly() {
         assert!(stderr.contains("--features v4l"), "{stderr}");
     }
 }
+
+#[test]
+fn unit_stops_restarting_on_a_configuration_error() {
+    let u = unit();
+    assert_eq!(u["Restart"], vec!["on-failure".to_string()]);
+    // Exit status 2 (drogue-vision --help: bad config, camera, arguments).
+    assert_eq!(u["RestartPreventExitStatus"], vec!["2".to_string()]);
+}
+
+#[test]
+fn deployment_files_point_only_at_readme_sections_that_exist() {
+    let readme = std::fs::read_to_string(repo_file("README.md")).unwrap();
+    let headings: Vec<String> = readme
+        .lines()
+        .filter(|l| l.starts_with('#'))
+        .map(|l| l.trim_start_matches('#').trim().to_string())
+        .collect();
+    let mut seen = 0;
+    for file in ["config/companion.toml", "config/drogue-vision.service"] {
+        // A pointer may wrap over two comment lines: join them first.
+        let text: String = std::fs::read_to_string(repo_file(file))
+            .unwrap()
+            .lines()
+            .map(|l| l.trim_start_matches('#').trim())
+            .collect::<Vec<_>>()
+            .join(" ");
+        for (i, _) in text.match_indices("README: \"") {
+            let rest = &text[i + "README: \"".len()..];
+            let name = &rest[..rest.find('"').expect("closing quote")];
+            assert!(
+                headings.iter().any(|h| h == name),
+                "{file} points at README section \"{name}\", which does not exist"
+            );
+            seen += 1;
+        }
+    }
+    assert!(seen >= 3, "only {seen} README pointers found");
+}

@@ -5,4 +5,5 @@ pub mod recover;
 pub mod review;
 pub mod run;
 pub mod run_stats;
+pub mod run_status;
 pub mod sim;

@@ -162,7 +162,17 @@ pub fn run(args: &ProcessArgs) -> Result<ProcessSummary, ProcessError> {
         config.drogue.inner_radius_m = r;
     }
     let (frames, camera, skipped, total) = open_input(args)?;
+    // The first frame decides before anything is written: a calibration of
+    // another size is refused (exit 2, no output files).
+    let mut frames = frames.peekable();
+    if let Some((_, Ok(first))) = frames.peek() {
+        camera
+            .check_frame_size(first.image.width(), first.image.height())
+            .map_err(setup)?;
+    }
     let mount = Mount::from_config(&config.mount).map_err(setup)?;
+    let camera_size = (camera.width, camera.height);
+    let mut measurer = Measurer::new(camera.clone(), &config).map_err(|e| setup(e.to_string()))?;
     let log = match &args.log {
         Some(path) => Some(
             FlightLog::start_file(&config.log, path, &camera).map_err(|e| {
@@ -174,7 +184,6 @@ pub fn run(args: &ProcessArgs) -> Result<ProcessSummary, ProcessError> {
         ),
         None => None,
     };
-    let mut measurer = Measurer::new(camera, &config).map_err(|e| setup(e.to_string()))?;
 
     let out_err = |e: std::io::Error| ProcessError::Output {
         path: args.out.display().to_string(),
@@ -192,6 +201,18 @@ pub fn run(args: &ProcessArgs) -> Result<ProcessSummary, ProcessError> {
             Err(e) => {
                 summary.unreadable += 1;
                 tracing::warn!(frame = %name, "unreadable frame: {e}");
+                DetectionRecord::unreadable(name, e)
+            }
+            Ok(frame) if camera_size != (frame.image.width(), frame.image.height()) => {
+                let e = format!(
+                    "{}x{} frame, the camera calibration is for {}x{}",
+                    frame.image.width(),
+                    frame.image.height(),
+                    camera_size.0,
+                    camera_size.1
+                );
+                summary.unreadable += 1;
+                tracing::warn!(frame = %name, "frame skipped: {e}");
                 DetectionRecord::unreadable(name, e)
             }
             Ok(frame) => {

@@ -3,6 +3,7 @@
 //! waits on the log and the link always gets the newest measurement.
 
 use super::run_stats::{PipelineMeters, ResourceSummary, StatsThread};
+use super::run_status::{StatusReporter, Vitals};
 use crate::camera::CameraModel;
 use crate::config::{Config, SitlAnchor, VehiclePoseSource};
 use crate::frame::Frame;
@@ -38,10 +39,12 @@ pub struct RunArgs {
     /// Frame source: sim:SCENARIO_NAME_OR_FILE, dir:PATH, mcap:PATH, v4l:/dev/videoN.
     #[arg(long)]
     pub source: Option<String>,
-    /// Camera file for sources that do not carry their own (dir:, v4l:).
+    /// Camera file; overrides the source's own (mcap:, sim:), required for
+    /// dir: and v4l: without `[camera] file`. Its size must be the frames'.
     #[arg(long)]
     pub camera: Option<PathBuf>,
-    /// MAVLink connection: udpout:HOST:PORT, udpin:HOST:PORT, tcpout:HOST:PORT, serial:DEVICE:BAUD.
+    /// MAVLink connection: udpout:HOST:PORT, udpin:HOST:PORT (= udp:), udpbcast:BCAST:PORT,
+    /// tcpout:HOST:PORT (= tcp:), tcpin:HOST:PORT, serial:DEVICE:BAUD.
     #[arg(long)]
     pub mavlink: Option<String>,
     /// Folder of the MCAP log (default from the config: logs/).
@@ -381,21 +384,21 @@ fn open_source(spec: &SourceSpec, config: &Config) -> Result<Box<dyn FrameSource
     })
 }
 
-/// The camera: the source's own, else `--camera`, else `[camera] file`.
+/// The camera: `--camera` (the user's word wins, even over a log's or a
+/// scenario's own), else the source's own, else `[camera] file`.
 fn choose_camera(
     source: &dyn FrameSource,
     args: &RunArgs,
     config: &Config,
 ) -> Result<CameraModel, RunError> {
+    if let Some(file) = &args.camera {
+        return CameraModel::load(file).map_err(|e| RunError::Setup(e.to_string()));
+    }
     if let Some(c) = source.camera() {
         return Ok(c);
     }
-    let file = args
-        .camera
-        .clone()
-        .or_else(|| {
-            (!config.camera.file.as_os_str().is_empty()).then(|| config.camera.file.clone())
-        })
+    let file = (!config.camera.file.as_os_str().is_empty())
+        .then(|| config.camera.file.clone())
         .ok_or_else(|| {
             RunError::Setup(
                 "this source has no camera of its own: give --camera or [camera] file".into(),
@@ -462,11 +465,11 @@ fn spawn_measurement(
     mount: Mount,
     link: LinkHandle,
     log: LogHandle,
-    counts: (Arc<Mutex<RunSummary>>, Arc<PipelineMeters>),
+    counts: (Arc<Mutex<RunSummary>>, Arc<PipelineMeters>, Arc<Vitals>),
     handed_to_link: Option<std::sync::mpsc::Sender<u64>>,
     realtime_priority: u8,
 ) -> (SyncSender<Arc<Frame>>, std::thread::JoinHandle<()>) {
-    let (counts, meters) = counts;
+    let (counts, meters, vitals) = counts;
     // Capacity 1: at most one frame waits; a newer one finding it full is
     // skipped for measurement (still logged), so latency never builds up.
     let (tx, rx) = sync_channel::<Arc<Frame>>(1);
@@ -489,6 +492,11 @@ fn spawn_measurement(
             if let Ok(mut c) = counts.lock() {
                 c.measured += 1;
                 c.detected += u64::from(m.detection.is_some());
+            }
+            vitals.measured.fetch_add(1, Ordering::Relaxed);
+            if let Some(d) = &m.detection {
+                vitals.detected.fetch_add(1, Ordering::Relaxed);
+                vitals.set_range_m(d.position_body_m.norm());
             }
             log.measurement(m, record, &mount);
             meters.frame_measured();
@@ -534,6 +542,17 @@ pub fn run(
     }
     let mut frames_in = open_frames(&spec, vehicle_pose, args, &config)?;
     let camera = choose_camera(frames_in.source(), args, &config)?;
+    // The first frame is read before anything starts (link, log files): a
+    // calibration of another size is refused with exit status 2.
+    let mut first_item = match &mut frames_in {
+        Frames::Source(source) => source.next_frame(),
+        Frames::ClosedLoop(_) => None,
+    };
+    if let Some(Ok(first)) = &first_item {
+        camera
+            .check_frame_size(first.image.width(), first.image.height())
+            .map_err(RunError::Setup)?;
+    }
     let mut config = config;
     if let Some(m) = frames_in.source().mount() {
         config.mount = m;
@@ -588,6 +607,8 @@ pub fn run(
     // send latency of each frame's first pose message is counted on the way.
     let events = link.events();
     let event_log = log.clone();
+    let vitals = Arc::new(Vitals::default());
+    let event_vitals = Arc::clone(&vitals);
     let events_done = Arc::new(AtomicBool::new(false));
     let events_done_flag = Arc::clone(&events_done);
     let event_thread = std::thread::spawn(move || {
@@ -600,7 +621,9 @@ pub fn run(
                         && last_sent_capture != Some(captured)
                     {
                         last_sent_capture = Some(captured);
-                        latency_ms.add(ev.time_ns.saturating_sub(captured) as f64 * 1e-6);
+                        let ms = ev.time_ns.saturating_sub(captured) as f64 * 1e-6;
+                        latency_ms.add(ms);
+                        event_vitals.set_latency_ms(ms.max(1e-6));
                     }
                     event_log.mavlink(ev);
                 }
@@ -626,7 +649,11 @@ pub fn run(
         mount,
         link.clone(),
         log.clone(),
-        (Arc::clone(&counts), Arc::clone(&meters)),
+        (
+            Arc::clone(&counts),
+            Arc::clone(&meters),
+            Arc::clone(&vitals),
+        ),
         yield_to_measurement.then_some(handed_tx),
         config.run.realtime_priority,
     );
@@ -649,6 +676,7 @@ pub fn run(
         Frames::Source(_) => true,
     };
     let paced = frames_in.source().recorded_timeline() && !args.fast;
+    let status = StatusReporter::spawn(Arc::clone(&vitals), link.clone(), log_dir.clone());
     // This thread takes each frame from the source (a camera's dequeue, the
     // pacer's wake-up at a frame's due time) and hands it on.
     realtime_if_asked("capture", priority);
@@ -659,6 +687,7 @@ pub fn run(
         // The source's own CPU (rendering, decoding) is counted apart from
         // the pipeline's.
         let item = meters.time_source(|| match &mut frames_in {
+            Frames::Source(_) if first_item.is_some() => first_item.take(),
             Frames::Source(source) => source.next_frame(),
             // Rendered [run] vehicle_pose_delay_ms after its capture, from
             // the autopilot's pose at the capture.
@@ -672,6 +701,7 @@ pub fn run(
         };
         frames += 1;
         meters.frames_in.fetch_add(1, Ordering::Relaxed);
+        vitals.frames.fetch_add(1, Ordering::Relaxed);
         let mut frame = match item {
             Ok(f) => f,
             Err(e) => {
@@ -680,6 +710,11 @@ pub fn run(
                 continue;
             }
         };
+        if let Err(e) = camera.check_frame_size(frame.image.width(), frame.image.height()) {
+            unreadable += 1;
+            tracing::warn!(seq = frame.seq, "frame skipped: {e}");
+            continue;
+        }
         if paced && matches!(frames_in, Frames::Source(_)) {
             frame.capture_time_ns = pacer.wait_until_due(frame.capture_time_ns, frame.seq);
         }
@@ -715,6 +750,7 @@ pub fn run(
     };
     drop(frame_tx);
     let _ = measure_thread.join();
+    status.finish();
     link.shutdown();
     events_done.store(true, Ordering::SeqCst);
     let latency_ms = event_thread.join().unwrap_or_default();
@@ -753,6 +789,33 @@ pub fn run(
     Ok(summary)
 }
 
+/// The link's end-of-run line: what was sent, and the autopilot's
+/// heartbeat as it was (never heard is not "0 losses"; a link that never
+/// opened says so).
+fn link_report(l: &crate::link::LinkStats) -> String {
+    if !l.opened {
+        return format!(
+            "\nlink: never opened ({} failed attempts, see the warnings above); nothing sent",
+            l.io_errors
+        );
+    }
+    let sent: Vec<String> = l.sent.iter().map(|(k, v)| format!("{v} {k}")).collect();
+    let sent = if sent.is_empty() {
+        "nothing".to_string()
+    } else {
+        sent.join(", ")
+    };
+    let heartbeat = if l.autopilot_heard() {
+        format!("{} autopilot heartbeat losses", l.heartbeat_losses)
+    } else {
+        "autopilot heartbeat never heard".to_string()
+    };
+    format!(
+        "\nlink: sent {sent}; {} stale poses not sent; {heartbeat}, {} reconnects",
+        l.stale, l.reconnects
+    )
+}
+
 impl RunSummary {
     /// The end-of-run lines on stderr.
     pub fn report(&self) -> String {
@@ -766,16 +829,7 @@ impl RunSummary {
             .iter()
             .map(|p| p.display().to_string())
             .collect();
-        let link_line = self.link.as_ref().map_or_else(String::new, |l| {
-            let sent: Vec<String> = l.sent.iter().map(|(k, v)| format!("{v} {k}")).collect();
-            format!(
-                "\nlink: sent {}; {} stale poses not sent; {} autopilot heartbeat losses, {} reconnects",
-                sent.join(", "),
-                l.stale,
-                l.heartbeat_losses,
-                l.reconnects
-            )
-        });
+        let link_line = self.link.as_ref().map_or_else(String::new, link_report);
         let held = if self.vehicle_pose_held > 0 {
             format!(
                 ", {} rendered with a held autopilot pose (stale)",

@@ -1,5 +1,8 @@
-//! `drogue-vision sim`: render a scenario to PNG frames, `truth.jsonl` and
-//! `camera.yaml` (ROS camera_info).
+//! `drogue-vision sim`: render a scenario to PNG frames, `truth.jsonl`,
+//! `camera.yaml` (ROS camera_info) and `mount.toml`, the scenario's camera
+//! mount as a config fragment (`[mount]`), so that `process --camera
+//! OUT/camera.yaml --config OUT/mount.toml OUT` measures in the same body
+//! frame as the truth's `position_body`.
 
 use drogue_sim::{Scenario, Simulator};
 use indicatif::{ProgressBar, ProgressStyle};
@@ -10,7 +13,8 @@ use std::path::{Path, PathBuf};
 #[derive(Clone, Debug, clap::Args)]
 #[command(
     after_help = "Builtin scenarios: approach, station_keeping, severe_turbulence, low_sun, \
-contact. Exit status: 0 done; 1 the output could not be written; 2 bad scenario or arguments."
+contact. Writes the frames (PNG), truth.jsonl, camera.yaml and mount.toml (the scenario's \
+camera mount, a config fragment for `process --config`). Exit status: 0 done; 1 the output could not be written; 2 bad scenario or arguments."
 )]
 pub struct SimArgs {
     /// Builtin scenario name or a scenario TOML file.
@@ -51,6 +55,22 @@ fn output_err(path: &Path, e: impl std::fmt::Display) -> SimCommandError {
     }
 }
 
+/// The scenario's camera mount as a config fragment `--config` takes.
+fn mount_fragment(sim: &Simulator) -> Result<String, SimCommandError> {
+    #[derive(serde::Serialize)]
+    struct Fragment {
+        mount: crate::measure::mount::MountConfig,
+    }
+    let body = toml::to_string(&Fragment {
+        mount: crate::source::sim::mount_config(sim.mount()),
+    })
+    .map_err(|e| SimCommandError::Setup(format!("the scenario's mount: {e}")))?;
+    Ok(format!(
+        "# The camera mount of this simulated scenario (drogue-vision sim).\n\
+         # Use it with the frames: process --camera camera.yaml --config mount.toml .\n{body}"
+    ))
+}
+
 /// Renders the scenario into `args.out`.
 pub fn run(args: &SimArgs) -> Result<SimSummary, SimCommandError> {
     let scenario =
@@ -62,6 +82,8 @@ pub fn run(args: &SimArgs) -> Result<SimSummary, SimCommandError> {
     std::fs::create_dir_all(&args.out).map_err(|e| output_err(&args.out, e))?;
     let camera_path = args.out.join("camera.yaml");
     std::fs::write(&camera_path, sim.camera_yaml()).map_err(|e| output_err(&camera_path, e))?;
+    let mount_path = args.out.join("mount.toml");
+    std::fs::write(&mount_path, mount_fragment(&sim)?).map_err(|e| output_err(&mount_path, e))?;
     let truth_path = args.out.join("truth.jsonl");
     let file = std::fs::File::create(&truth_path).map_err(|e| output_err(&truth_path, e))?;
     let mut truth_out = BufWriter::new(file);

@@ -1,4 +1,17 @@
-//! Connection addresses in the rust-mavlink / MAVProxy forms.
+//! Connection addresses in the forms MAVProxy, pymavlink and rust-mavlink
+//! read (`mavlink-core` `ConnectionAddress::parse_address`, pymavlink
+//! `mavutil.mavlink_connection`):
+//!
+//! | form | here | MAVProxy / pymavlink | rust-mavlink |
+//! |---|---|---|---|
+//! | `udpout:H:P` | send to H:P | same | same |
+//! | `udpin:H:P`, `udp:H:P` | listen on H:P | `udp:` = listen | no `udp:` |
+//! | `udpbcast:H:P` | broadcast to H:P until a peer answers, then to it | same | broadcast only |
+//! | `tcpout:H:P`, `tcp:H:P` | connect to H:P | `tcp:` = connect | no `tcp:` |
+//! | `tcpin:H:P` | listen on H:P, one client at a time | same | same |
+//! | `serial:DEV:BAUD` | UART | a bare device path | same |
+//!
+//! Any other form is refused with this list ([`FORMS`]).
 
 use std::fmt;
 
@@ -11,9 +24,15 @@ pub enum Address {
     /// `udpin:HOST:PORT`: bind HOST:PORT, reply to whoever sent last. Cannot
     /// send before the peer has sent something.
     UdpIn(String),
+    /// `udpbcast:BCAST:PORT`: send to a broadcast address (SO_BROADCAST)
+    /// until a peer answers, then to that peer only (pymavlink's lock-on).
+    UdpBcast(String),
     /// `tcpout:HOST:PORT`: connect to a TCP server (SITL, a router);
     /// reconnects with back-off.
     TcpOut(String),
+    /// `tcpin:HOST:PORT`: listen, serve one client at a time; after it hangs
+    /// up, wait for the next.
+    TcpIn(String),
     /// `serial:DEVICE:BAUD`: a UART; reopened with back-off when it fails or
     /// disappears.
     Serial { device: String, baud: u32 },
@@ -24,7 +43,9 @@ impl fmt::Display for Address {
         match self {
             Self::UdpOut(a) => write!(f, "udpout:{a}"),
             Self::UdpIn(a) => write!(f, "udpin:{a}"),
+            Self::UdpBcast(a) => write!(f, "udpbcast:{a}"),
             Self::TcpOut(a) => write!(f, "tcpout:{a}"),
+            Self::TcpIn(a) => write!(f, "tcpin:{a}"),
             Self::Serial { device, baud } => write!(f, "serial:{device}:{baud}"),
         }
     }
@@ -43,17 +64,25 @@ fn host_port(s: &str, whole: &str) -> Result<String, String> {
     Ok(s.to_string())
 }
 
+/// The accepted forms, for error messages and `--help`.
+pub const FORMS: &str = "udpout:HOST:PORT (send), udpin:HOST:PORT or udp:HOST:PORT (listen), \
+udpbcast:BCAST:PORT (broadcast, then the first peer that answers), tcpout:HOST:PORT or \
+tcp:HOST:PORT (connect), tcpin:HOST:PORT (listen), serial:DEVICE:BAUD";
+
 impl Address {
-    /// Parses `udpout:`, `udpin:`, `tcpout:` or `serial:` addresses.
+    /// Parses one of the [`FORMS`].
     pub fn parse(s: &str) -> Result<Self, String> {
         let s = s.trim();
-        let (scheme, rest) = s.split_once(':').ok_or_else(|| {
-            format!("`{s}`: expected udpout:HOST:PORT, udpin:HOST:PORT, tcpout:HOST:PORT or serial:DEVICE:BAUD")
-        })?;
+        let (scheme, rest) = s
+            .split_once(':')
+            .ok_or_else(|| format!("`{s}`: expected one of {FORMS}"))?;
         match scheme {
-            "udpout" | "udp" => Ok(Self::UdpOut(host_port(rest, s)?)),
-            "udpin" => Ok(Self::UdpIn(host_port(rest, s)?)),
+            "udpout" => Ok(Self::UdpOut(host_port(rest, s)?)),
+            // MAVProxy and pymavlink read `udp:` as listen.
+            "udpin" | "udp" => Ok(Self::UdpIn(host_port(rest, s)?)),
+            "udpbcast" => Ok(Self::UdpBcast(host_port(rest, s)?)),
             "tcpout" | "tcp" => Ok(Self::TcpOut(host_port(rest, s)?)),
+            "tcpin" => Ok(Self::TcpIn(host_port(rest, s)?)),
             "serial" => {
                 let (device, baud) = rest
                     .rsplit_once(':')
@@ -71,7 +100,7 @@ impl Address {
                 })
             }
             other => Err(format!(
-                "`{s}`: unknown scheme `{other}` (use udpout, udpin, tcpout or serial)"
+                "`{s}`: unknown form `{other}:`; use one of {FORMS}"
             )),
         }
     }
@@ -79,7 +108,7 @@ impl Address {
     /// Stream transports (TCP, serial) are rebuilt when they fail; UDP only
     /// when its socket errors.
     pub fn is_stream(&self) -> bool {
-        matches!(self, Self::TcpOut(_) | Self::Serial { .. })
+        matches!(self, Self::TcpOut(_) | Self::TcpIn(_) | Self::Serial { .. })
     }
 }
 
@@ -100,6 +129,23 @@ mod tests {
         assert_eq!(
             Address::parse("tcpout:localhost:5760"),
             Ok(Address::TcpOut("localhost:5760".into()))
+        );
+        // MAVProxy / pymavlink: `udp:` listens, `tcp:` connects.
+        assert_eq!(
+            Address::parse("udp:0.0.0.0:14550"),
+            Ok(Address::UdpIn("0.0.0.0:14550".into()))
+        );
+        assert_eq!(
+            Address::parse("tcp:127.0.0.1:5760"),
+            Ok(Address::TcpOut("127.0.0.1:5760".into()))
+        );
+        assert_eq!(
+            Address::parse("tcpin:0.0.0.0:5760").map(|a| a.to_string()),
+            Ok("tcpin:0.0.0.0:5760".to_string())
+        );
+        assert_eq!(
+            Address::parse("udpbcast:192.168.1.255:14550").map(|a| a.to_string()),
+            Ok("udpbcast:192.168.1.255:14550".to_string())
         );
         assert_eq!(
             Address::parse("serial:/dev/ttyACM0:921600"),
@@ -122,7 +168,10 @@ mod tests {
             "udpout:127.0.0.1",
             "udpout:127.0.0.1:99999",
             "udpout::14550",
-            "tcpin:127.0.0.1:5760",
+            "tcpin:127.0.0.1",
+            "udpbcast::14550",
+            "file:/tmp/x.tlog",
+            "/dev/ttyACM0",
             "serial:/dev/ttyS0",
             "serial:/dev/ttyS0:fast",
             "serial::57600",
@@ -130,6 +179,20 @@ mod tests {
         ] {
             let e = Address::parse(bad).unwrap_err();
             assert!(e.contains('`'), "{bad}: {e}");
+        }
+        // An unknown form lists every form.
+        let e = Address::parse("udpx:1.2.3.4:5").unwrap_err();
+        for form in [
+            "udpout:",
+            "udpin:",
+            "udp:",
+            "udpbcast:",
+            "tcpout:",
+            "tcp:",
+            "tcpin:",
+            "serial:",
+        ] {
+            assert!(e.contains(form), "{e}");
         }
     }
 }

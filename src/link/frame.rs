@@ -247,10 +247,10 @@ impl FrameEncoder {
         }
     }
 
-    /// One frame holding `msg`; its bytes are `raw.raw_bytes()`.
-    pub fn encode(
+    /// One frame holding `msg` (of any dialect); its bytes are `raw.raw_bytes()`.
+    pub fn encode<M: Message>(
         &mut self,
-        msg: &MavMessage,
+        msg: &M,
         signing: Option<&SigningData>,
     ) -> MAVLinkV2MessageRaw {
         let header = MavHeader {

@@ -37,6 +37,25 @@
 //!   child_frame_id MAV_FRAME_BODY_FRD, q = q_D_body, velocities unknown
 //!   (NaN, velocity_covariance[0] = NaN), estimator MAV_ESTIMATOR_TYPE_VISION.
 //!
+//! - TARGET_RELATIVE (`target_relative`, id 511, MAVLink `development`
+//!   dialect, for PX4's vision_target_estimator): the drogue centre relative
+//!   to the vehicle. With the vehicle attitude at the capture time (ATTITUDE
+//!   on the link): frame TARGET_OBS_FRAME_LOCAL_OFFSET_NED, x y z =
+//!   R_ned_body times body xyz, q_target = q_ned_drogue, q_sensor = identity (the frame
+//!   already is vehicle-carried NED). Without it: TARGET_OBS_FRAME_BODY_FRD,
+//!   x y z = body xyz, q_target = q_body_drogue, q_sensor = 0 (ignored: the
+//!   autopilot rotates with its own attitude at the timestamp). The camera
+//!   mount enters through x y z (camera → body happens in the measurement),
+//!   the attitude through the frame choice. pos_std = square roots of the
+//!   diagonal of the drogue centre's covariance in that frame (the
+//!   measurement's `position_cov_body_m2`, rotated), times
+//!   `[link] target_relative_std_scale`, at least
+//!   `target_relative_std_floor_m`; yaw_std = the normal's sigma, scaled the
+//!   same way. timestamp = capture time, µs, on our Unix clock (what PX4's
+//!   receiver maps with its TIMESYNC), or on the autopilot's clock once our
+//!   own TIMESYNC exchange has converged when `target_relative_clock =
+//!   "autopilot"`. type = LANDING_TARGET_TYPE_VISION_OTHER, id = 0.
+//!
 //! Time fields carry the frame's capture time in microseconds on our clock
 //! (Unix epoch), the same clock as our TIMESYNC replies' tc1: PX4 maps it
 //! with its timesync (`sync_stamp`), ArduPilot with its offboard jitter
@@ -50,8 +69,117 @@ use mavlink::dialects::ardupilotmega::{
     MavEstimatorType, MavFrame, MavMessage, MavModeFlag, MavState, MavType, ODOMETRY_DATA,
     TIMESYNC_DATA, VISION_POSITION_ESTIMATE_DATA,
 };
+use mavlink::dialects::development as dev;
 use nalgebra::{Matrix3, Matrix6, Rotation3, UnitQuaternion, Vector3};
 use serde_json::{Value, json};
+
+/// A message the link writes: one of the `ardupilotmega` dialect, or
+/// TARGET_RELATIVE of the `development` dialect (id 511, which
+/// `ardupilotmega` does not include). Both share the MAVLink 2 framing.
+#[derive(Clone, Debug)]
+pub enum Outbound {
+    Ardupilot(MavMessage),
+    Development(dev::MavMessage),
+}
+
+impl From<MavMessage> for Outbound {
+    fn from(m: MavMessage) -> Self {
+        Self::Ardupilot(m)
+    }
+}
+
+impl Outbound {
+    pub fn name(&self) -> &'static str {
+        match self {
+            Self::Ardupilot(m) => m.message_name(),
+            Self::Development(m) => m.message_name(),
+        }
+    }
+
+    /// The fields as JSON for `/mavlink/out` (see [`fields_json`]).
+    pub fn fields_json(&self) -> Value {
+        match self {
+            Self::Ardupilot(m) => fields_json(m),
+            Self::Development(dev::MavMessage::TARGET_RELATIVE(d)) => json!({
+                "timestamp": d.timestamp, "id": d.id, "frame": format!("{:?}", d.frame),
+                "x": d.x, "y": d.y, "z": d.z, "pos_std": d.pos_std, "yaw_std": d.yaw_std,
+                "q_target": d.q_target, "q_sensor": d.q_sensor,
+                "type": format!("{:?}", d.mavtype),
+            }),
+            Self::Development(other) => {
+                json!({ "id": other.message_id(), "debug": format!("{other:?}") })
+            }
+        }
+    }
+}
+
+/// What TARGET_RELATIVE needs besides the measurement.
+#[derive(Clone, Copy, Debug)]
+pub struct TargetRelativeInputs {
+    /// Vehicle attitude (body → NED) at the capture time, if known.
+    pub q_ned_body: Option<UnitQuaternion<f64>>,
+    /// Autopilot clock minus ours, ns: stamps the capture time on the
+    /// autopilot's clock; `None`: our Unix clock.
+    pub autopilot_offset_ns: Option<i64>,
+    /// Factor on the reported standard deviations (>= 1: inflation).
+    pub std_scale: f64,
+    /// Smallest position standard deviation reported, metres.
+    pub std_floor_m: f64,
+}
+
+/// TARGET_RELATIVE (see the module doc); `None` when a value is not finite.
+pub fn target_relative(
+    m: &Measurement,
+    pose: &DroguePose,
+    det: &Detection,
+    inputs: &TargetRelativeInputs,
+) -> Option<dev::MavMessage> {
+    let cov_body = det.position_cov_body_m2;
+    let (frame, p, cov, q_target, q_sensor) = match inputs.q_ned_body {
+        Some(q_nb) => {
+            let r = q_nb.to_rotation_matrix();
+            (
+                dev::TargetObsFrame::TARGET_OBS_FRAME_LOCAL_OFFSET_NED,
+                q_nb * pose.position_body_m,
+                r.matrix() * cov_body * r.matrix().transpose(),
+                wxyz(&(q_nb * pose.q_body_drogue())),
+                [1.0, 0.0, 0.0, 0.0],
+            )
+        }
+        None => (
+            dev::TargetObsFrame::TARGET_OBS_FRAME_BODY_FRD,
+            pose.position_body_m,
+            cov_body,
+            wxyz(&pose.q_body_drogue()),
+            [0.0; 4],
+        ),
+    };
+    let std = |var: f64| (var.max(0.0).sqrt() * inputs.std_scale).max(inputs.std_floor_m);
+    let pos_std = [std(cov[(0, 0)]), std(cov[(1, 1)]), std(cov[(2, 2)])];
+    let yaw_std = det.normal_sigma_rad * inputs.std_scale;
+    if !(finite3(&p) && pos_std.iter().all(|s| s.is_finite()) && yaw_std.is_finite()) {
+        return None;
+    }
+    let t_ns = match inputs.autopilot_offset_ns {
+        Some(off) => u64::try_from(i128::from(m.capture_time_ns) + i128::from(off)).ok()?,
+        None => m.capture_time_ns,
+    };
+    Some(dev::MavMessage::TARGET_RELATIVE(
+        dev::TARGET_RELATIVE_DATA {
+            timestamp: t_ns / 1000,
+            id: 0,
+            frame,
+            x: p.x as f32,
+            y: p.y as f32,
+            z: p.z as f32,
+            pos_std: pos_std.map(|s| s as f32),
+            yaw_std: yaw_std as f32,
+            q_target,
+            q_sensor,
+            mavtype: dev::LandingTargetType::LANDING_TARGET_TYPE_VISION_OTHER,
+        },
+    ))
+}
 
 /// The drogue frame and the receiver's pose in it, from one detection.
 #[derive(Clone, Debug)]
@@ -499,6 +627,64 @@ mod tests {
         assert_eq!(o.q, [1.0, 0.0, 0.0, 0.0]);
         assert!(o.vx.is_nan() && o.velocity_covariance[0].is_nan());
         assert_eq!(o.pose_covariance, v.covariance);
+    }
+
+    #[test]
+    fn target_relative_in_body_then_in_offset_ned() {
+        let p = Vector3::new(6.0, 0.5, -0.3);
+        let det = detection(p, Vector3::new(-1.0, 0.0, 0.0));
+        let m = measurement(det.clone());
+        let pose = DroguePose::new(&det).unwrap();
+        let mut inputs = TargetRelativeInputs {
+            q_ned_body: None,
+            autopilot_offset_ns: None,
+            std_scale: 1.0,
+            std_floor_m: 0.0,
+        };
+        // No attitude: body FRD, q_sensor zero (ignored by the receiver).
+        let dev::MavMessage::TARGET_RELATIVE(b) =
+            target_relative(&m, &pose, &det, &inputs).unwrap()
+        else {
+            panic!("not TARGET_RELATIVE");
+        };
+        assert_eq!(b.frame, dev::TargetObsFrame::TARGET_OBS_FRAME_BODY_FRD);
+        assert_eq!((b.x, b.y, b.z), (6.0, 0.5, -0.3));
+        assert_eq!(b.timestamp, 1_700_000_000_123_456);
+        // The test detection's covariance is diag(1e-4, 4e-6, 9e-6) m^2.
+        let want = [1e-2f32, 2e-3, 3e-3];
+        for (got, want) in b.pos_std.iter().zip(want) {
+            assert!((got - want).abs() < 1e-7, "{:?}", b.pos_std);
+        }
+        assert!((b.yaw_std - 0.01).abs() < 1e-7);
+        assert_eq!(b.q_sensor, [0.0; 4]);
+        assert_eq!(b.q_target, [1.0, 0.0, 0.0, 0.0]);
+
+        // Yawed 90 degrees east: forward -> east, right -> south; the
+        // covariance's axes swap with it. Scale 2, floor 5 mm; clock offset.
+        let yaw90 = UnitQuaternion::from_euler_angles(0.0, 0.0, std::f64::consts::FRAC_PI_2);
+        inputs.q_ned_body = Some(yaw90);
+        inputs.std_scale = 2.0;
+        inputs.std_floor_m = 0.005;
+        inputs.autopilot_offset_ns = Some(-1_699_000_000_000_000_000);
+        let dev::MavMessage::TARGET_RELATIVE(n) =
+            target_relative(&m, &pose, &det, &inputs).unwrap()
+        else {
+            panic!("not TARGET_RELATIVE");
+        };
+        assert_eq!(
+            n.frame,
+            dev::TargetObsFrame::TARGET_OBS_FRAME_LOCAL_OFFSET_NED
+        );
+        assert!((n.x + 0.5).abs() < 1e-5 && (n.y - 6.0).abs() < 1e-5 && (n.z + 0.3).abs() < 1e-5);
+        let want = [0.005f32, 0.02, 0.006]; // north: max(2 * 2 mm, 5 mm); east: 2 * 10 mm
+        for (got, want) in n.pos_std.iter().zip(want) {
+            assert!((got - want).abs() < 1e-6, "{:?}", n.pos_std);
+        }
+        assert_eq!(n.q_sensor, [1.0, 0.0, 0.0, 0.0]);
+        // 1_700_000_000_123_456_789 ns - 1_699_000_000_000_000_000 ns, in µs.
+        assert_eq!(n.timestamp, 1_000_000_123_456);
+        let h = std::f32::consts::FRAC_1_SQRT_2;
+        assert!((n.q_target[0] - h).abs() < 1e-6 && (n.q_target[3] - h).abs() < 1e-6);
     }
 
     #[test]

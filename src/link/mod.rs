@@ -5,8 +5,8 @@
 //!   blocking the measurement thread), drops it when it has no detection or is
 //!   older than `max_age_ms`, applies the rate limit and builds the configured
 //!   pose messages ([`messages`]);
-//! - the *connection* task owns the transport ([`address`]: `udpout`, `udpin`,
-//!   `tcpout`, `serial`), writes MAVLink 2 frames (signed when a key is set),
+//! - the *connection* task owns the transport ([`address`]: `udpout`, `udpin`
+//!   / `udp`, `udpbcast`, `tcpout` / `tcp`, `tcpin`, `serial`), writes MAVLink 2 frames (signed when a key is set),
 //!   sends HEARTBEAT and TIMESYNC, reads and validates everything that comes
 //!   back ([`frame`]), keeps the autopilot's attitude and position in a short
 //!   time-indexed buffer ([`telemetry`]) and rebuilds the transport with
@@ -50,13 +50,30 @@ pub enum PoseMessage {
     VisionPositionEstimate,
     /// ODOMETRY with the same pose and covariance.
     Odometry,
+    /// TARGET_RELATIVE (id 511, `development` dialect) for PX4's
+    /// vision_target_estimator: the drogue relative to the vehicle with its
+    /// standard deviations (see [`messages`]).
+    TargetRelative,
+}
+
+/// Which clock TARGET_RELATIVE's `timestamp` is on (`[link]
+/// target_relative_clock`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum TimeClock {
+    /// Our Unix clock, µs: the receiver maps it with its own TIMESYNC (PX4's
+    /// `sync_stamp`), as for every other message.
+    Own,
+    /// The autopilot's clock (µs since its boot), once our TIMESYNC requests
+    /// have converged; our Unix clock until then.
+    Autopilot,
 }
 
 /// `[link]` in the config. Every key is documented in `config/default.toml`.
 #[derive(Clone, Debug, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct LinkConfig {
-    /// `udpout:HOST:PORT`, `udpin:HOST:PORT`, `tcpout:HOST:PORT`, `serial:DEVICE:BAUD`.
+    /// One of [`address::FORMS`].
     pub connection: String,
     /// Our system id: the autopilot's (its telemetry is read from this id too).
     pub system_id: u8,
@@ -93,6 +110,12 @@ pub struct LinkConfig {
     pub signing_require: bool,
     /// Capacity of the `events()` queue (drop-oldest beyond it).
     pub event_queue: usize,
+    /// TARGET_RELATIVE: factor on the reported standard deviations.
+    pub target_relative_std_scale: f64,
+    /// TARGET_RELATIVE: smallest reported position standard deviation, m.
+    pub target_relative_std_floor_m: f64,
+    /// TARGET_RELATIVE: the clock of `timestamp`.
+    pub target_relative_clock: TimeClock,
 }
 
 /// A link that could not be started (bad address or configuration). Faults
@@ -159,6 +182,18 @@ fn validate(cfg: &LinkConfig, connection: Option<&str>) -> Result<Settings, Link
     }
     if cfg.write_timeout_ms == 0 {
         return bad("write_timeout_ms must be > 0".into());
+    }
+    if !(cfg.target_relative_std_scale.is_finite() && cfg.target_relative_std_scale >= 1.0) {
+        return bad(format!(
+            "target_relative_std_scale = {} must be >= 1 (a covariance is never shrunk)",
+            cfg.target_relative_std_scale
+        ));
+    }
+    if !(cfg.target_relative_std_floor_m.is_finite() && cfg.target_relative_std_floor_m >= 0.0) {
+        return bad(format!(
+            "target_relative_std_floor_m = {} must be >= 0",
+            cfg.target_relative_std_floor_m
+        ));
     }
     if cfg.event_queue == 0 {
         return bad("event_queue must be > 0".into());
@@ -329,11 +364,11 @@ mod tests {
     #[test]
     fn every_pose_message_name_parses_from_config() {
         let c = Config::from_toml_str(
-            "[link]\nmessages = [\"landing_target\", \"landing_target_ned\", \"vision_position_estimate\", \"odometry\"]\n",
+            "[link]\nmessages = [\"landing_target\", \"landing_target_ned\", \"vision_position_estimate\", \"odometry\", \"target_relative\"]\n",
             "u.toml",
         )
         .unwrap();
-        assert_eq!(c.link.messages.len(), 4);
+        assert_eq!(c.link.messages.len(), 5);
         assert!(Config::from_toml_str("[link]\nmessages = [\"pose\"]\n", "u.toml").is_err());
     }
 }

@@ -3,13 +3,13 @@
 
 use super::events::{EventSender, LinkEvent};
 use super::frame::{DecodeCounts, FrameDecoder, FrameEncoder, Incoming};
-use super::messages::{self, DroguePose};
+use super::messages::{self, DroguePose, Outbound, TargetRelativeInputs};
 use super::stats::{Counters, bump};
 use super::telemetry::Telemetry;
 use super::transport::Transport;
-use super::{PoseMessage, Settings};
+use super::{PoseMessage, Settings, TimeClock};
 use crate::measure::Measurement;
-use mavlink::dialects::ardupilotmega::{MavAutopilot, MavMessage};
+use mavlink::dialects::ardupilotmega::{HEARTBEAT_DATA, MavAutopilot, MavMessage, MavType};
 use mavlink::{Message, SigningConfig, SigningData};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
@@ -29,7 +29,7 @@ pub(crate) struct Context {
 
 /// A pose message on its way to the connection task.
 pub(crate) struct Outgoing {
-    pub message: MavMessage,
+    pub message: Outbound,
     pub capture_time_ns: u64,
 }
 
@@ -54,7 +54,7 @@ impl Context {
 
 /// Builds the configured messages for one measurement; empty when nothing
 /// may be sent (no detection, degenerate values, no vehicle pose for NED).
-pub(crate) fn build_pose_messages(ctx: &Context, m: &Measurement, out: &mut Vec<MavMessage>) {
+pub(crate) fn build_pose_messages(ctx: &Context, m: &Measurement, out: &mut Vec<Outbound>) {
     let Some(det) = m.detection.as_ref() else {
         bump(&ctx.counters.no_detection, 1);
         return;
@@ -65,20 +65,54 @@ pub(crate) fn build_pose_messages(ctx: &Context, m: &Measurement, out: &mut Vec<
     };
     for kind in &ctx.settings.cfg.messages {
         match kind {
-            PoseMessage::LandingTarget => out.push(messages::landing_target_body(m, &pose, det)),
+            PoseMessage::LandingTarget => {
+                out.push(messages::landing_target_body(m, &pose, det).into())
+            }
             PoseMessage::LandingTargetNed => {
                 let vehicle = lock(&ctx.telemetry).pose_at(m.capture_time_ns);
                 match vehicle.and_then(|v| messages::landing_target_ned(m, &pose, det, &v)) {
-                    Some(msg) => out.push(msg),
+                    Some(msg) => out.push(msg.into()),
                     None => bump(&ctx.counters.no_vehicle_pose, 1),
                 }
             }
             PoseMessage::VisionPositionEstimate => {
-                out.push(messages::vision_position_estimate(m, &pose, det))
+                out.push(messages::vision_position_estimate(m, &pose, det).into())
             }
-            PoseMessage::Odometry => out.push(messages::odometry(m, &pose, det)),
+            PoseMessage::Odometry => out.push(messages::odometry(m, &pose, det).into()),
+            PoseMessage::TargetRelative => {
+                let cfg = &ctx.settings.cfg;
+                let inputs = {
+                    let tm = lock(&ctx.telemetry);
+                    TargetRelativeInputs {
+                        q_ned_body: tm.attitude_at(m.capture_time_ns),
+                        autopilot_offset_ns: match cfg.target_relative_clock {
+                            TimeClock::Own => None,
+                            TimeClock::Autopilot => tm.timesync.converged_offset_ns(),
+                        },
+                        std_scale: cfg.target_relative_std_scale,
+                        std_floor_m: cfg.target_relative_std_floor_m,
+                    }
+                };
+                match messages::target_relative(m, &pose, det, &inputs) {
+                    Some(msg) => out.push(Outbound::Development(msg)),
+                    None => bump(&ctx.counters.invalid_measurement, 1),
+                }
+            }
         }
     }
+}
+
+/// Whether a HEARTBEAT (from the configured system id) is the autopilot's:
+/// a ground station (MAV_TYPE_GCS), a companion or router
+/// (MAV_TYPE_ONBOARD_CONTROLLER) or any component that names no autopilot
+/// (MAV_AUTOPILOT_INVALID: cameras, gimbals, ...) may share the system id
+/// and must not keep "autopilot heard" alive.
+pub(crate) fn is_autopilot_heartbeat(h: &HEARTBEAT_DATA) -> bool {
+    h.autopilot != MavAutopilot::MAV_AUTOPILOT_INVALID
+        && !matches!(
+            h.mavtype,
+            MavType::MAV_TYPE_GCS | MavType::MAV_TYPE_ONBOARD_CONTROLLER
+        )
 }
 
 /// Takes the newest measurement, applies the rate limit and staleness, and
@@ -216,7 +250,12 @@ pub(crate) async fn connection_task(
         if ctx.stopped.load(Ordering::SeqCst) {
             return;
         }
-        match Transport::open(&address).await {
+        // `tcpin` waits for a client inside `open`: a shutdown must end it.
+        let opened = tokio::select! {
+            r = Transport::open(&address) => r,
+            _ = shutdown.changed() => return,
+        };
+        match opened {
             Ok(transport) => {
                 if opened_before {
                     bump(&ctx.counters.reconnects, 1);
@@ -228,6 +267,7 @@ pub(crate) async fn connection_task(
                 failures_in_a_row = 0;
                 backoff = min_backoff;
                 ctx.counters.connected.store(true, Ordering::Relaxed);
+                ctx.counters.opened.store(true, Ordering::Relaxed);
                 let end = conn.run(transport, &mut out, &mut shutdown).await;
                 ctx.counters.connected.store(false, Ordering::Relaxed);
                 match end {
@@ -328,14 +368,14 @@ impl Connection {
                     None => return End::Shutdown,
                 },
                 _ = heartbeat.tick() => {
-                    if let Err(e) = self.send(&mut transport, &messages::heartbeat(), None).await {
+                    if let Err(e) = self.send(&mut transport, &messages::heartbeat().into(), None).await {
                         return e;
                     }
                 }
                 _ = timesync.tick(), if cfg.timesync_interval_ms > 0 => {
                     let now = i64::try_from(unix_now_ns()).unwrap_or(i64::MAX);
                     lock(&self.ctx.telemetry).timesync.request_sent(now);
-                    if let Err(e) = self.send(&mut transport, &messages::timesync_request(now), None).await {
+                    if let Err(e) = self.send(&mut transport, &messages::timesync_request(now).into(), None).await {
                         return e;
                     }
                 }
@@ -371,13 +411,16 @@ impl Connection {
     async fn send(
         &mut self,
         transport: &mut Transport,
-        message: &MavMessage,
+        message: &Outbound,
         capture_time_ns: Option<u64>,
     ) -> Result<(), End> {
         if self.ctx.stopped.load(Ordering::SeqCst) {
             return Err(End::Shutdown);
         }
-        let raw = self.encoder.encode(message, self.signing.as_ref());
+        let raw = match message {
+            Outbound::Ardupilot(m) => self.encoder.encode(m, self.signing.as_ref()),
+            Outbound::Development(m) => self.encoder.encode(m, self.signing.as_ref()),
+        };
         let limit = Duration::from_millis(self.ctx.settings.cfg.write_timeout_ms);
         let datagram = transport.is_datagram();
         // Stamped as the write starts: a stamp taken after it returns could
@@ -386,13 +429,13 @@ impl Connection {
         let write_started_ns = unix_now_ns();
         match timeout(limit, transport.write(raw.raw_bytes())).await {
             Ok(Ok(true)) => {
-                self.ctx.counters.count_sent(message.message_name());
+                self.ctx.counters.count_sent(message.name());
                 self.ctx.events.push(LinkEvent {
                     time_ns: write_started_ns,
                     outgoing: true,
-                    name: message.message_name().to_string(),
+                    name: message.name().to_string(),
                     capture_time_ns,
-                    fields: messages::fields_json(message),
+                    fields: message.fields_json(),
                 });
                 Ok(())
             }
@@ -448,9 +491,7 @@ impl Connection {
         });
         let from_autopilot = from_system == u32::from(cfg.system_id);
         match &m.message {
-            MavMessage::HEARTBEAT(h)
-                if from_autopilot && h.autopilot != MavAutopilot::MAV_AUTOPILOT_INVALID =>
-            {
+            MavMessage::HEARTBEAT(h) if from_autopilot && is_autopilot_heartbeat(h) => {
                 self.ctx.counters.heartbeat_seen(Instant::now());
                 if self.heartbeat_lost {
                     self.heartbeat_lost = false;
@@ -477,7 +518,7 @@ impl Connection {
                         u8::try_from(from_system).unwrap_or(0),
                         from_component,
                     );
-                    self.send(transport, &reply, None).await?;
+                    self.send(transport, &reply.into(), None).await?;
                     if from_autopilot {
                         lock(&self.ctx.telemetry).timesync.request_seen(t.ts1, now);
                     }

@@ -47,9 +47,14 @@ pub struct LinkStats {
     /// Events dropped because the `events()` consumer was too slow.
     pub dropped_events: u64,
     /// Age of the last autopilot heartbeat, seconds; negative: never seen.
+    /// Only a HEARTBEAT of the configured system id that names an autopilot
+    /// and is not a ground station's or an onboard controller's counts.
     pub last_heartbeat_age_s: f64,
     /// Whether the transport is currently open.
     pub connected: bool,
+    /// Whether the transport was ever open (`tcpin` before a client, a
+    /// serial port that never opened: false).
+    pub opened: bool,
     /// Estimated autopilot clock minus own clock (Unix), ns; 0 when unknown.
     pub timesync_offset_ns: i64,
 }
@@ -76,6 +81,7 @@ pub(crate) struct Counters {
     pub invalid_measurement: AtomicU64,
     pub dropped_outgoing: AtomicU64,
     pub connected: std::sync::atomic::AtomicBool,
+    pub opened: std::sync::atomic::AtomicBool,
     pub timesync_offset_ns: std::sync::atomic::AtomicI64,
     last_heartbeat: Mutex<Option<Instant>>,
 }
@@ -89,6 +95,31 @@ fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
     // A panic while holding these short locks cannot leave the data
     // inconsistent (plain counters), so a poisoned lock is still usable.
     m.lock().unwrap_or_else(|p| p.into_inner())
+}
+
+impl LinkStats {
+    /// Whether an autopilot heartbeat was ever heard.
+    pub fn autopilot_heard(&self) -> bool {
+        self.last_heartbeat_age_s >= 0.0
+    }
+
+    /// One phrase for the link's state: `not open`, `open, autopilot never
+    /// heard`, `open, autopilot heard 0.4 s ago`, `closed (reopening), ...`.
+    pub fn state(&self) -> String {
+        let transport = match (self.opened, self.connected) {
+            (false, _) => return "never opened".to_string(),
+            (true, true) => "open",
+            (true, false) => "down (reopening)",
+        };
+        if self.autopilot_heard() {
+            format!(
+                "{transport}, autopilot heard {:.1} s ago",
+                self.last_heartbeat_age_s
+            )
+        } else {
+            format!("{transport}, autopilot never heard")
+        }
+    }
 }
 
 impl Counters {
@@ -133,6 +164,7 @@ impl Counters {
                 .last_heartbeat()
                 .map_or(-1.0, |t| t.elapsed().as_secs_f64()),
             connected: self.connected.load(Ordering::Relaxed),
+            opened: self.opened.load(Ordering::Relaxed),
             timesync_offset_ns: self.timesync_offset_ns.load(Ordering::Relaxed),
         }
     }

@@ -29,6 +29,8 @@ const MAX_SAMPLES: usize = 256;
 /// A jump of the clock offset beyond this is a reboot or a new clock: restart.
 const OFFSET_JUMP_NS: i64 = 1_000_000_000;
 const SYNC_WINDOW: usize = 8;
+/// Replies to our own TIMESYNC requests before the offset counts as converged.
+pub const CONVERGED_REPLIES: usize = 4;
 
 /// Estimates autopilot clock minus our clock, ns.
 #[derive(Default)]
@@ -85,6 +87,19 @@ impl TimeSync {
             self.one_way.pop_front();
         }
         self.one_way.push_back(offset);
+    }
+
+    /// The offset once our own requests have had [`CONVERGED_REPLIES`]
+    /// answers in the window (the one-way estimate from the autopilot's
+    /// requests is off by the link latency and does not count).
+    pub fn converged_offset_ns(&self) -> Option<i64> {
+        if self.replies.len() < CONVERGED_REPLIES {
+            return None;
+        }
+        self.replies
+            .iter()
+            .min_by_key(|(rtt, _)| *rtt)
+            .map(|&(_, offset)| offset)
     }
 
     /// Autopilot clock minus our clock, ns, if known.
@@ -207,19 +222,26 @@ impl Telemetry {
         self.position.push(t, v);
     }
 
+    /// The attitude (body → NED) at `t` (ns, Unix), as [`Telemetry::pose_at`]
+    /// finds it, without needing a position.
+    pub fn attitude_at(&self, t: u64) -> Option<UnitQuaternion<f64>> {
+        match self.attitude.around(t, self.tolerance_ns) {
+            (Some(a), Some(b)) => Some(
+                a.value
+                    .try_slerp(&b.value, fraction(t, a.time_ns, b.time_ns), 1e-9)
+                    .unwrap_or(a.value),
+            ),
+            (Some(a), None) | (None, Some(a)) => Some(a.value),
+            (None, None) => None,
+        }
+    }
+
     /// Attitude and position at `t` (ns, Unix): interpolated between the
     /// samples around it (slerp for the attitude), or the nearest one, as long
     /// as they are within the tolerance; `None` otherwise.
     pub fn pose_at(&self, t: u64) -> Option<VehiclePose> {
         let tol = self.tolerance_ns;
-        let q = match self.attitude.around(t, tol) {
-            (Some(a), Some(b)) => a
-                .value
-                .try_slerp(&b.value, fraction(t, a.time_ns, b.time_ns), 1e-9)
-                .unwrap_or(a.value),
-            (Some(a), None) | (None, Some(a)) => a.value,
-            (None, None) => return None,
-        };
+        let q = self.attitude_at(t)?;
         let p = match self.position.around(t, tol) {
             (Some(a), Some(b)) => a.value.lerp(&b.value, fraction(t, a.time_ns, b.time_ns)),
             (Some(a), None) | (None, Some(a)) => a.value,
@@ -281,6 +303,15 @@ mod tests {
         assert!(ts.reply(t1 + off + MS as i64, t1, t1 + 2 * MS as i64));
         // The shorter round trip wins: exact offset.
         assert_eq!(ts.offset_ns(), Some(off));
+        // Two replies are not yet a converged exchange; four are.
+        assert_eq!(ts.converged_offset_ns(), None);
+        let mut converged = TimeSync::default();
+        for k in 0..CONVERGED_REPLIES as i64 {
+            let t = unix0 + k * 1000 * MS as i64;
+            converged.request_sent(t);
+            assert!(converged.reply(t + off + MS as i64, t, t + 2 * MS as i64));
+        }
+        assert_eq!(converged.converged_offset_ns(), Some(off));
         // A reply to someone else's request is ignored.
         assert!(!ts.reply(123, 456, t1));
 

@@ -1,10 +1,11 @@
-//! The byte transports under the link: UDP (out/in), TCP client, serial.
+//! The byte transports under the link: UDP (out, in, broadcast), TCP
+//! (client, server), serial.
 
 use super::address::Address;
 use std::io;
 use std::net::SocketAddr;
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
-use tokio::net::{TcpStream, UdpSocket};
+use tokio::net::{TcpListener, TcpStream, UdpSocket};
 use tokio_serial::SerialPortBuilderExt;
 
 pub(crate) enum Transport {
@@ -14,6 +15,9 @@ pub(crate) enum Transport {
         peer: Option<SocketAddr>,
         /// `udpin`: follow the sender of the last datagram.
         follow_sender: bool,
+        /// `udpbcast`: the first datagram's sender becomes the peer
+        /// (pymavlink's lock-on); cleared once locked.
+        lock_on_reply: bool,
     },
     Tcp(TcpStream),
     Serial(tokio_serial::SerialStream),
@@ -45,13 +49,37 @@ impl Transport {
                     socket: UdpSocket::bind(bind).await?,
                     peer: Some(dest),
                     follow_sender: false,
+                    lock_on_reply: false,
                 })
             }
             Address::UdpIn(hp) => Ok(Self::Udp {
                 socket: UdpSocket::bind(resolve(hp).await?).await?,
                 peer: None,
                 follow_sender: true,
+                lock_on_reply: false,
             }),
+            Address::UdpBcast(hp) => {
+                let dest = resolve(hp).await?;
+                let socket = UdpSocket::bind(SocketAddr::from(([0, 0, 0, 0], 0))).await?;
+                // Without SO_BROADCAST a send to a broadcast address fails (EACCES).
+                socket.set_broadcast(true)?;
+                Ok(Self::Udp {
+                    socket,
+                    peer: Some(dest),
+                    follow_sender: false,
+                    lock_on_reply: true,
+                })
+            }
+            Address::TcpIn(hp) => {
+                // Bound for one client: while it is served, others are
+                // refused; after it hangs up the link reopens and listens again.
+                let listener = TcpListener::bind(resolve(hp).await?).await?;
+                tracing::info!(address = %address, "mavlink link: waiting for a TCP client");
+                let (s, from) = listener.accept().await?;
+                tracing::info!(%from, "mavlink link: TCP client connected");
+                s.set_nodelay(true)?;
+                Ok(Self::Tcp(s))
+            }
             Address::TcpOut(hp) => {
                 let s = TcpStream::connect(resolve(hp).await?).await?;
                 s.set_nodelay(true)?;
@@ -82,10 +110,14 @@ impl Transport {
                 socket,
                 peer,
                 follow_sender,
+                lock_on_reply,
             } => {
                 let (n, from) = socket.recv_from(buf).await?;
                 if *follow_sender {
                     *peer = Some(from);
+                } else if *lock_on_reply {
+                    *peer = Some(from);
+                    *lock_on_reply = false;
                 }
                 Ok(n)
             }

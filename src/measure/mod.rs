@@ -179,16 +179,33 @@ impl Measurer {
         let t = Instant::now();
         let candidate = self.detector.detect(&frame.image, hint.as_ref());
         times.detect_us = micros_since(t);
+        if candidate.is_none() {
+            tracing::debug!(seq = frame.seq, tracked, "not detected: no rim candidate");
+        }
 
         let detection = candidate.and_then(|cand| {
             let t = Instant::now();
             let undistorted = &cand.rim_points_undistorted_px;
-            let fitted = self.fitter.fit(undistorted, frame.seq).ok()?;
+            let fitted = match self.fitter.fit(undistorted, frame.seq) {
+                Ok(f) => f,
+                Err(e) => {
+                    tracing::debug!(
+                        seq = frame.seq,
+                        rim_points = undistorted.len(),
+                        "not detected: ellipse fit refused: {e}"
+                    );
+                    return None;
+                }
+            };
             times.fit_us = micros_since(t);
 
             let t = Instant::now();
-            let [first, second] =
-                pose::cone_pose(&fitted.ellipse, &self.camera, self.inner_radius_m)?;
+            let Some([first, second]) =
+                pose::cone_pose(&fitted.ellipse, &self.camera, self.inner_radius_m)
+            else {
+                tracing::debug!(seq = frame.seq, "not detected: no pose from the ellipse");
+                return None;
+            };
             let canopy_scores = ambiguity::canopy_supports(
                 &frame.image,
                 &self.camera,
@@ -229,6 +246,17 @@ impl Measurer {
             let normal_body = self.mount.vector_camera_to_body(&choice.pose.normal_camera);
             let position_cov_body_m2 = self.mount.covariance_camera_to_body(&cov_camera);
             times.pose_us = micros_since(t);
+            tracing::debug!(
+                seq = frame.seq,
+                tracked,
+                rim_points = cand.rim_points_px.len(),
+                inliers = quality.inliers,
+                rms_px = fitted.rms_residual_px,
+                canopy_scores = ?canopy_scores,
+                disambiguation = ?choice.how,
+                range_m = position_body_m.norm(),
+                "detected"
+            );
             Some(Detection {
                 ellipse_px: fitted.ellipse,
                 pose_camera: choice.pose,

@@ -24,7 +24,7 @@ pub fn mount_config(spec: &MountSpec) -> MountConfig {
 /// The simulator's camera as the pipeline reads it (through its YAML, as any
 /// camera file).
 pub fn camera_model(sim: &Simulator) -> Result<CameraModel, SourceError> {
-    CameraModel::from_yaml_str(&sim.camera_yaml(), "(simulator camera)").map_err(|e| {
+    CameraModel::from_yaml_str(&sim.camera_yaml(), "of the simulator").map_err(|e| {
         SourceError::Open {
             source_name: "sim".into(),
             message: e.to_string(),

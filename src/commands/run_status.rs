@@ -1,0 +1,264 @@
+//! What `run` says while it runs: on a terminal, one status line redrawn
+//! about once a second (frames, detected, range, latency, link state, log
+//! size); otherwise (systemd, a pipe) a plain `tracing` line every 10 s.
+//! Colours only on a terminal, and never with `NO_COLOR` set
+//! (<https://no-color.org>).
+//!
+//! The figures come from counters the pipeline keeps anyway ([`Vitals`]):
+//! nothing here is on the frame path.
+
+use crate::link::LinkHandle;
+use std::io::{IsTerminal, Write};
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant, SystemTime};
+
+/// Redraw period on a terminal.
+const TERMINAL_PERIOD: Duration = Duration::from_secs(1);
+/// Log-line period without a terminal.
+const PLAIN_PERIOD: Duration = Duration::from_secs(10);
+
+/// Whether stderr may carry colours: a terminal, and `NO_COLOR` unset or empty.
+pub fn colour_allowed() -> bool {
+    std::io::stderr().is_terminal() && std::env::var_os("NO_COLOR").is_none_or(|v| v.is_empty())
+}
+
+/// Live figures of the run, bumped by the pipeline's threads.
+#[derive(Default)]
+pub struct Vitals {
+    pub frames: AtomicU64,
+    pub measured: AtomicU64,
+    pub detected: AtomicU64,
+    /// Range of the last detection, metres, as f64 bits (0: none yet).
+    last_range_bits: AtomicU64,
+    /// Capture → send of the last pose, ms, as f64 bits (0: none yet).
+    last_latency_bits: AtomicU64,
+}
+
+impl Vitals {
+    pub fn set_range_m(&self, r: f64) {
+        self.last_range_bits.store(r.to_bits(), Ordering::Relaxed);
+    }
+
+    pub fn set_latency_ms(&self, ms: f64) {
+        self.last_latency_bits
+            .store(ms.to_bits(), Ordering::Relaxed);
+    }
+
+    fn range_m(&self) -> Option<f64> {
+        let r = f64::from_bits(self.last_range_bits.load(Ordering::Relaxed));
+        (r > 0.0).then_some(r)
+    }
+
+    fn latency_ms(&self) -> Option<f64> {
+        let l = f64::from_bits(self.last_latency_bits.load(Ordering::Relaxed));
+        (l > 0.0).then_some(l)
+    }
+}
+
+/// Bytes of this run's MCAP files so far: the `.mcap` files of `dir`
+/// written since `since` (leftovers recovered at start-up excluded).
+fn log_bytes(dir: &PathBuf, since: SystemTime) -> u64 {
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return 0;
+    };
+    entries
+        .flatten()
+        .filter(|e| {
+            let name = e.file_name().to_string_lossy().into_owned();
+            name.ends_with(".mcap") && !name.contains("recovered")
+        })
+        .filter_map(|e| e.metadata().ok())
+        .filter(|m| m.modified().is_ok_and(|t| t >= since))
+        .map(|m| m.len())
+        .sum()
+}
+
+/// One status text; `colour` wraps the link state in green, yellow or red.
+fn status_text(vitals: &Vitals, link: &LinkHandle, log_bytes: u64, colour: bool) -> String {
+    let frames = vitals.frames.load(Ordering::Relaxed);
+    let measured = vitals.measured.load(Ordering::Relaxed);
+    let detected = vitals.detected.load(Ordering::Relaxed);
+    let pct = if measured > 0 {
+        100.0 * detected as f64 / measured as f64
+    } else {
+        0.0
+    };
+    let range = vitals
+        .range_m()
+        .map_or("range -".to_string(), |r| format!("range {r:.2} m"));
+    let latency = vitals
+        .latency_ms()
+        .map_or("latency -".to_string(), |l| format!("latency {l:.1} ms"));
+    let stats = link.stats();
+    let state = stats.state();
+    let state = if colour {
+        let code = match (stats.connected, stats.autopilot_heard()) {
+            (true, true) if stats.last_heartbeat_age_s < 3.0 => "32", // green
+            (true, _) => "33",                                        // yellow
+            (false, _) => "31",                                       // red
+        };
+        format!("\x1b[{code}m{state}\x1b[0m")
+    } else {
+        state
+    };
+    format!(
+        "frames {frames}, detected {detected} ({pct:.1} %), {range}, {latency}, link {state}, log {:.1} MB",
+        log_bytes as f64 / 1e6
+    )
+}
+
+/// The reporting thread; [`StatusReporter::finish`] stops it and clears the
+/// line.
+pub struct StatusReporter {
+    stop: Arc<AtomicBool>,
+    handle: Option<JoinHandle<()>>,
+    terminal: bool,
+}
+
+impl StatusReporter {
+    pub fn spawn(vitals: Arc<Vitals>, link: LinkHandle, log_dir: PathBuf) -> Self {
+        let terminal = std::io::stderr().is_terminal();
+        let colour = colour_allowed();
+        let stop = Arc::new(AtomicBool::new(false));
+        let stop_flag = Arc::clone(&stop);
+        let since = SystemTime::now() - Duration::from_secs(1);
+        let handle = std::thread::Builder::new()
+            .name("status".into())
+            .spawn(move || {
+                let period = if terminal {
+                    TERMINAL_PERIOD
+                } else {
+                    PLAIN_PERIOD
+                };
+                let mut next = Instant::now() + period;
+                while !stop_flag.load(Ordering::SeqCst) {
+                    std::thread::sleep(Duration::from_millis(100));
+                    if Instant::now() < next {
+                        continue;
+                    }
+                    next += period;
+                    let text = status_text(&vitals, &link, log_bytes(&log_dir, since), colour);
+                    if terminal {
+                        // \r and erase-line: redraw in place; a log line
+                        // printed meanwhile erases it first (see main.rs).
+                        let mut err = std::io::stderr().lock();
+                        let _ = write!(err, "\r\x1b[2K{text}");
+                        let _ = err.flush();
+                    } else {
+                        tracing::info!("status: {text}");
+                    }
+                }
+            })
+            .ok();
+        Self {
+            stop,
+            handle,
+            terminal,
+        }
+    }
+
+    /// Stops the thread; on a terminal the status line is erased.
+    pub fn finish(self) {}
+}
+
+impl Drop for StatusReporter {
+    fn drop(&mut self) {
+        self.stop.store(true, Ordering::SeqCst);
+        if let Some(h) = self.handle.take() {
+            let _ = h.join();
+        }
+        if self.terminal {
+            let mut err = std::io::stderr().lock();
+            let _ = write!(err, "\r\x1b[2K");
+            let _ = err.flush();
+        }
+    }
+}
+
+/// The `tracing` writer for stderr: on a terminal each event first erases
+/// the status line (`\r`, erase line), so log lines never run into it; the
+/// next redraw puts it back under them.
+#[derive(Clone, Copy)]
+pub struct StderrWriter {
+    terminal: bool,
+}
+
+impl StderrWriter {
+    pub fn new() -> Self {
+        Self {
+            terminal: std::io::stderr().is_terminal(),
+        }
+    }
+}
+
+impl Default for StderrWriter {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+/// One event's writer (see [`StderrWriter`]).
+pub struct EventWriter {
+    erase_first: bool,
+}
+
+impl Write for EventWriter {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        let mut err = std::io::stderr().lock();
+        if std::mem::take(&mut self.erase_first) {
+            err.write_all(b"\r\x1b[2K")?;
+        }
+        err.write(buf)
+    }
+
+    fn flush(&mut self) -> std::io::Result<()> {
+        std::io::stderr().flush()
+    }
+}
+
+impl<'a> tracing_subscriber::fmt::MakeWriter<'a> for StderrWriter {
+    type Writer = EventWriter;
+
+    fn make_writer(&'a self) -> Self::Writer {
+        EventWriter {
+            erase_first: self.terminal,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn status_text_has_every_figure_and_colour_only_when_asked() {
+        let rt = tokio::runtime::Builder::new_current_thread()
+            .enable_all()
+            .build()
+            .unwrap();
+        let cfg = crate::config::Config::embedded().link;
+        let link =
+            crate::link::Link::start(&cfg, Some("serial:/nonexistent/tty:57600"), rt.handle())
+                .unwrap();
+        let v = Vitals::default();
+        v.frames.store(30, Ordering::Relaxed);
+        v.measured.store(20, Ordering::Relaxed);
+        v.detected.store(15, Ordering::Relaxed);
+        v.set_range_m(12.345);
+        v.set_latency_ms(4.26);
+        let plain = status_text(&v, &link, 2_500_000, false);
+        assert_eq!(
+            plain,
+            "frames 30, detected 15 (75.0 %), range 12.35 m, latency 4.3 ms, link never opened, log 2.5 MB"
+        );
+        let coloured = status_text(&v, &link, 0, true);
+        assert!(
+            coloured.contains("\x1b[31mnever opened\x1b[0m"),
+            "{coloured}"
+        );
+        link.shutdown();
+    }
+}
