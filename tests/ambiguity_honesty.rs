@@ -2,7 +2,8 @@
 //! pose ambiguity only where its two predictions really separate, and
 //! continuity only between poses close in time and space. Frames and truth
 //! from the simulator (`drogue_sim::sweep`, exact conics); the reference
-//! range set through `DROGUE_REFERENCE_DIR` when it is set.
+//! range set through `DROGUE_REFERENCE_DIR` (ignored by a plain `cargo test`;
+//! `.ci/run` runs it with `--include-ignored`).
 
 mod common;
 mod sweep;
@@ -185,10 +186,9 @@ fn process_folder_without_independent_does_not_borrow_normals() {
 /// The reference range set, as unrelated views and as a sequence: never
 /// `canopy_rim` with the mirror's normal, never `continuity`.
 #[test]
+#[ignore = "needs the reference frames: set DROGUE_REFERENCE_DIR (.ci/run does)"]
 fn reference_range_set_is_honest() {
-    let Some(dir) = common::reference_dir() else {
-        return;
-    };
+    let dir = common::reference_dir();
     let set = dir.join("range");
     let truth: Vec<serde_json::Value> = std::fs::read_to_string(set.join("truth.jsonl"))
         .unwrap()
