@@ -9,6 +9,7 @@
 //! drogue-vision's), [`conic`] (exact image ellipse and mirror pose),
 //! [`render`] (8-bit gray frames) and [`Simulator`] tying them together.
 
+pub mod bounds;
 pub mod camera;
 pub mod conic;
 pub mod error;

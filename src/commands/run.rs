@@ -522,6 +522,9 @@ pub fn run(
     }
     let mut frames_in = open_frames(&spec, vehicle_pose, args, &config)?;
     let camera = choose_camera(frames_in.source(), args, &config)?;
+    if let Frames::Source(s) = &mut frames_in {
+        s.expect_size(camera.width, camera.height);
+    }
     let mut config = config;
     if let Some(m) = frames_in.source().mount() {
         config.mount = m;
@@ -561,6 +564,10 @@ pub fn run(
     // send latency of each frame's first pose message is counted on the way.
     let events = link.events();
     let event_log = log.clone();
+    // Received messages wait while the log's queue is half full: camera
+    // frames and measurements are never dropped for them (counted in the
+    // link stats as unlogged_incoming).
+    let busy_depth = (config.log.queue_len as u64).div_ceil(2);
     let events_done = Arc::new(AtomicBool::new(false));
     let events_done_flag = Arc::clone(&events_done);
     let event_thread = std::thread::spawn(move || {
@@ -574,6 +581,10 @@ pub fn run(
                     {
                         last_sent_capture = Some(captured);
                         latency_ms.add(ev.time_ns.saturating_sub(captured) as f64 * 1e-6);
+                    }
+                    if !ev.outgoing && event_log.queue_depth() >= busy_depth {
+                        events.skip_incoming();
+                        continue;
                     }
                     event_log.mavlink(ev);
                 }
@@ -645,7 +656,9 @@ pub fn run(
         };
         frames += 1;
         meters.frames_in.fetch_add(1, Ordering::Relaxed);
-        let mut frame = match item {
+        let checked =
+            item.and_then(|f| crate::image_io::check_frame_size(&f.image, &camera).map(|()| f));
+        let mut frame = match checked {
             Ok(f) => f,
             Err(e) => {
                 unreadable += 1;
