@@ -170,8 +170,14 @@ impl RateLimit {
             return None;
         }
         self.refill(now);
-        (self.tokens < 1.0)
-            .then(|| now + Duration::from_secs_f64((1.0 - self.tokens) / self.rate_hz))
+        // The config keeps the rate within [0.1, 10000] Hz; the wait is
+        // bounded anyway, so no rate can make this overflow (issue 16).
+        (self.tokens < 1.0).then(|| {
+            let wait = Duration::try_from_secs_f64((1.0 - self.tokens) / self.rate_hz)
+                .unwrap_or(Duration::MAX)
+                .min(Duration::from_secs(10));
+            now + wait
+        })
     }
 
     fn spend(&mut self, now: tokio::time::Instant) {
