@@ -49,7 +49,7 @@ fn frames() -> Vec<(String, GrayImage)> {
     ]
     .iter()
     .filter_map(|f| {
-        read_gray8(&dir.join(f))
+        read_gray8(&dir.join(f), None)
             .ok()
             .map(|img| (f.to_string(), img))
     })

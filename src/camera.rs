@@ -82,14 +82,52 @@ fn dimension(root: &Value, key: &str, file: &str) -> Result<u32, CameraError> {
     let v = root.get(key).ok_or_else(|| err(file, key, "missing"))?;
     v.as_u64()
         .and_then(|n| u32::try_from(n).ok())
-        .filter(|&n| (1..=100_000).contains(&n))
+        .filter(|&n| (1..=MAX_SIDE_PX).contains(&n))
         .ok_or_else(|| {
             err(
                 file,
                 key,
-                "expected a whole number of pixels from 1 to 100000",
+                format!("expected a whole number of pixels from 1 to {MAX_SIDE_PX}"),
             )
         })
+}
+
+/// Largest image side a camera file may give, pixels (the largest frame any
+/// source reads: frames are sized by the calibration).
+pub const MAX_SIDE_PX: u32 = 16_384;
+
+/// The intrinsics' allowed ranges: focal lengths (0, 1e6] px, principal point
+/// and skew within +-1e5 px, each plumb_bob coefficient within +-100 (real
+/// lenses stay well inside; beyond it the undistortion cannot converge).
+fn check_ranges(k: &Matrix3<f64>, d: &[f64; 5], file: &str) -> Result<(), CameraError> {
+    let checks = [
+        ("camera_matrix.data[0] (fx)", k[(0, 0)], 0.0, 1e6, true),
+        ("camera_matrix.data[4] (fy)", k[(1, 1)], 0.0, 1e6, true),
+        ("camera_matrix.data[1] (skew)", k[(0, 1)], -1e5, 1e5, false),
+        ("camera_matrix.data[2] (cx)", k[(0, 2)], -1e5, 1e5, false),
+        ("camera_matrix.data[5] (cy)", k[(1, 2)], -1e5, 1e5, false),
+    ];
+    for (field, v, lo, hi, lo_open) in checks {
+        let above = if lo_open { v > lo } else { v >= lo };
+        if !(above && v <= hi) {
+            let open = if lo_open { '(' } else { '[' };
+            return Err(err(
+                file,
+                field,
+                format!("{v} is outside the allowed range {open}{lo}, {hi}]"),
+            ));
+        }
+    }
+    for (i, v) in d.iter().enumerate() {
+        if !(v.is_finite() && v.abs() <= 100.0) {
+            return Err(err(
+                file,
+                &format!("distortion_coefficients.data[{i}]"),
+                format!("{v} is outside the allowed range [-100, 100]"),
+            ));
+        }
+    }
+    Ok(())
 }
 
 /// OpenCV writes `%YAML:1.0` (not valid YAML 1.1) and `!!opencv-matrix` tags;
@@ -201,6 +239,7 @@ impl CameraModel {
                 ));
             }
         };
+        check_ranges(&k, &distortion, file)?;
         let name = root
             .get("camera_name")
             .and_then(Value::as_str)

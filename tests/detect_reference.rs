@@ -136,7 +136,7 @@ fn reference_sets() {
             let frame = t["frame"].as_str().unwrap();
             let expect = t["expect"].as_str().unwrap();
             let path = dir.join(frame);
-            let Ok(image) = read_gray8(&path) else {
+            let Ok(image) = read_gray8(&path, None) else {
                 assert!(
                     expect != "detect",
                     "{set}/{frame}: unreadable but expect detect"

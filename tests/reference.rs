@@ -32,7 +32,7 @@ fn measure_set(set: &Path, config: &Config) -> Vec<(Truth, Option<FrameErrors>, 
         .enumerate()
         .map(|(seq, t)| {
             let path = set.join(&t.frame);
-            let image = read_gray8(&path).expect("reference frame");
+            let image = read_gray8(&path, None).expect("reference frame");
             measurer.forget_track();
             let m = measurer.measure(&Frame {
                 seq: seq as u64,

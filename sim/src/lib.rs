@@ -11,6 +11,7 @@
 //! [`sweep`] renders randomised unrelated frames, one factor at a time, for
 //! robustness tests.
 
+pub mod bounds;
 pub mod camera;
 pub mod conic;
 pub mod error;

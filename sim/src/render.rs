@@ -748,7 +748,7 @@ impl Renderer {
                 ))
             })
             .collect();
-        let m = scene.blur_px;
+        let m = bounded_blur(scene.blur_px, w, h);
         let blur_len = (m[0] * m[0] + m[1] * m[1]).sqrt();
         let mut dirty = vec![false; h];
         for &v in hose_layer.rows.iter().chain(&probe_layer.rows) {
@@ -1146,7 +1146,8 @@ impl Renderer {
         }
     }
 
-    /// Box blur along `m` (pixels, centred) within the box.
+    /// Box blur along `m` (pixels, centred) within the box; `m` comes
+    /// through [`bounded_blur`], so its taps are at most a few image sizes.
     #[inline(never)]
     fn blur(&mut self, rad: &mut [f32], b: PixelBox, m: [f64; 2]) {
         let len = (m[0] * m[0] + m[1] * m[1]).sqrt();
@@ -1308,6 +1309,22 @@ impl Renderer {
         }
         GrayImage::from_raw(w as u32, h as u32, out)
             .unwrap_or_else(|| GrayImage::new(w as u32, h as u32))
+    }
+}
+
+/// The blur vector a frame can use: none when not finite (a drogue at an
+/// unrepresentable position), and at most the image's diagonal long (a
+/// longer streak is the same flat smear, and the blur's work grows with its
+/// length).
+fn bounded_blur(m: [f64; 2], w: usize, h: usize) -> [f64; 2] {
+    let len = m[0].hypot(m[1]);
+    let diag = ((w * w + h * h) as f64).sqrt();
+    if !len.is_finite() {
+        [0.0, 0.0]
+    } else if len > diag {
+        [m[0] * diag / len, m[1] * diag / len]
+    } else {
+        m
     }
 }
 

@@ -4,6 +4,7 @@
 //! only what it changes; an unknown key is an error naming the file and key.
 //! Builtin scenarios are embedded, so they work with no files around.
 
+use crate::bounds::{self, Range};
 use crate::camera::SimCamera;
 use crate::error::SimError;
 use crate::turbulence::{self, Intensity};
@@ -23,6 +24,99 @@ pub const BUILTINS: [(&str, &str); 5] = [
     ),
     ("low_sun", include_str!("../scenarios/low_sun.toml")),
     ("contact", include_str!("../scenarios/contact.toml")),
+];
+
+/// Largest whole number a TOML file can hold (its integers are i64).
+const ANY_U64: f64 = i64::MAX as f64;
+/// Metres of a position within the scene (tanker, drogue, receiver offsets).
+const SCENE_M: Range = Range::closed(-1000.0, 1000.0);
+/// Metres of a position on the receiver's body.
+const BODY_M: Range = Range::closed(-100.0, 100.0);
+/// An angle, degrees.
+const ANGLE_DEG: Range = Range::closed(-360.0, 360.0);
+/// A relative radiance (1 = the sensor's white at gain 1).
+const RADIANCE: Range = Range::closed(0.0, 1.0);
+
+/// The allowed range of every number of a scenario, by dotted key (vectors:
+/// each element). A value outside it (NaN and infinities always are) is
+/// refused naming the file, the key and this range; a key missing here is
+/// refused too (the tests load every key). This table is the scenario
+/// reference's list of ranges (README: "Scenarios").
+pub const RANGES: &[(&str, Range)] = &[
+    ("seed", Range::closed(0.0, ANY_U64)),
+    ("fps", Range::above(0.0, 1000.0)),
+    ("duration_s", Range::above(0.0, 1_000_000.0)),
+    ("start_time_ns", Range::closed(0.0, ANY_U64)),
+    ("camera.width", Range::closed(16.0, 16_384.0)),
+    ("camera.height", Range::closed(16.0, 16_384.0)),
+    ("camera.fx", Range::above(0.0, 1_000_000.0)),
+    ("camera.fy", Range::above(0.0, 1_000_000.0)),
+    ("camera.cx", Range::closed(-100_000.0, 100_000.0)),
+    ("camera.cy", Range::closed(-100_000.0, 100_000.0)),
+    ("camera.distortion", Range::closed(-100.0, 100.0)),
+    ("camera.exposure_ms", Range::closed(0.0, 1000.0)),
+    ("camera.gain", Range::above(0.0, 100.0)),
+    ("camera.read_noise_dn", Range::closed(0.0, 255.0)),
+    ("camera.shot_noise_dn", Range::closed(0.0, 255.0)),
+    ("camera.vignette", Range::closed(0.0, 1.0)),
+    ("mount.position_body_m", BODY_M),
+    ("mount.roll_deg", ANGLE_DEG),
+    ("mount.pitch_deg", ANGLE_DEG),
+    ("mount.yaw_deg", ANGLE_DEG),
+    ("mount.probe_tip_body_m", BODY_M),
+    ("mount.probe_base_body_m", BODY_M),
+    ("mount.probe_base_radius_m", Range::above(0.0, 10.0)),
+    ("mount.probe_tip_radius_m", Range::above(0.0, 10.0)),
+    ("tanker.airspeed_mps", Range::above(0.0, 1000.0)),
+    (
+        "tanker.altitude_m",
+        Range::closed(turbulence::MIN_ALTITUDE_M, 25_000.0),
+    ),
+    ("tanker.heading_deg", ANGLE_DEG),
+    ("drogue.inner_radius_m", Range::above(0.0, 10.0)),
+    ("drogue.canopy_radius_m", Range::above(0.0, 20.0)),
+    ("drogue.trail_offset_m", SCENE_M),
+    ("drogue.hose_exit_m", SCENE_M),
+    ("drogue.hose_radius_m", Range::above(0.0, 1.0)),
+    ("drogue.struts", Range::closed(0.0, 64.0)),
+    ("drogue.strut_width_m", Range::closed(0.0, 1.0)),
+    ("drogue.rim_width_m", Range::closed(0.0, 1.0)),
+    ("drogue.roll_deg", ANGLE_DEG),
+    ("drogue.disc_radiance", RADIANCE),
+    ("drogue.canopy_radiance", RADIANCE),
+    ("drogue.rim_radiance", RADIANCE),
+    ("drogue.strut_radiance", RADIANCE),
+    ("drogue.hose_radiance", RADIANCE),
+    ("drogue.probe_radiance", RADIANCE),
+    ("turbulence.hose_lever_m", Range::above(0.0, 1000.0)),
+    ("turbulence.sway_lag_s", Range::above(0.0, 100.0)),
+    ("bow_wave.max_push_m", Range::closed(0.0, 10.0)),
+    ("bow_wave.decay_m", Range::above(0.0, 100.0)),
+    ("bow_wave.width_m", Range::above(0.0, 100.0)),
+    ("whip.amplitude_m", Range::closed(0.0, 10.0)),
+    ("whip.frequency_hz", Range::closed(0.0, 100.0)),
+    ("whip.damping_s", Range::above(0.0, 1000.0)),
+    ("whip.capture_radius_m", Range::closed(0.0, 10.0)),
+    ("receiver.start_offset_m", SCENE_M),
+    ("receiver.end_offset_m", SCENE_M),
+    ("receiver.approach_start_s", Range::closed(0.0, 1_000_000.0)),
+    ("receiver.approach_end_s", Range::closed(0.0, 1_000_000.0)),
+    ("receiver.tracking_lag_s", Range::closed(0.0, 100.0)),
+    ("receiver.roll_deg", ANGLE_DEG),
+    ("receiver.pitch_deg", ANGLE_DEG),
+    ("receiver.yaw_deg", ANGLE_DEG),
+    ("receiver.wobble_deg", Range::closed(0.0, 90.0)),
+    ("receiver.wobble_hz", Range::closed(0.0, 100.0)),
+    ("scene.sky_zenith", RADIANCE),
+    ("scene.sky_horizon", RADIANCE),
+    ("scene.ground", RADIANCE),
+    ("scene.cloud_cover", Range::closed(0.0, 1.0)),
+    ("scene.cloud_radiance", RADIANCE),
+    ("scene.sun_azimuth_deg", ANGLE_DEG),
+    ("scene.sun_elevation_deg", Range::closed(-90.0, 90.0)),
+    ("scene.glare", Range::closed(0.0, 10.0)),
+    ("scene.haze", Range::closed(0.0, 1.0)),
+    ("scene.haze_radiance", RADIANCE),
 ];
 
 /// One simulated run.
@@ -437,6 +531,21 @@ impl Scenario {
             }
         })?;
         s.source_name = file_name.to_string();
+        // The numbers as written (the parse above already refused unknown
+        // keys and wrong types).
+        let written: toml::Value =
+            toml::from_str(text).map_err(|e| s.bad("(toml)", &e.to_string()))?;
+        bounds::check(&written, RANGES).map_err(|v| {
+            s.bad(
+                &v.key,
+                &format!(
+                    "{} is outside the allowed range {}",
+                    v.value,
+                    v.range
+                        .map_or("(none known)".to_string(), |r| r.to_string())
+                ),
+            )
+        })?;
         s.validate()?;
         Ok(s)
     }
@@ -566,8 +675,27 @@ impl Scenario {
         let text = std::fs::read_to_string(&path)
             .map_err(|e| self.bad("camera.file", &format!("{}: {e}", path.display())))?;
         let cam = SimCamera::from_ros_yaml(&text, &path.display().to_string())?;
-        if cam.width > 16384 || cam.height > 16384 {
-            return Err(self.bad("camera.file", "image larger than 16384 pixels"));
+        let d = cam.distortion;
+        let numbers = [
+            ("camera.width", f64::from(cam.width)),
+            ("camera.height", f64::from(cam.height)),
+            ("camera.fx", cam.fx),
+            ("camera.fy", cam.fy),
+            ("camera.cx", cam.cx),
+            ("camera.cy", cam.cy),
+        ]
+        .into_iter()
+        .chain(d.iter().map(|&v| ("camera.distortion", v)));
+        for (key, v) in numbers {
+            if let Some(r) = bounds::range_of(RANGES, key).filter(|r| !r.contains(v)) {
+                return Err(self.bad(
+                    "camera.file",
+                    &format!(
+                        "{}: {key} = {v} is outside the allowed range {r}",
+                        path.display()
+                    ),
+                ));
+            }
         }
         Ok(cam)
     }
@@ -585,6 +713,149 @@ mod tests {
             assert!(s.frame_count() > 0);
         }
         assert_eq!(Scenario::builtin("approach").unwrap().frame_count(), 600);
+    }
+
+    /// Every number of a scenario (all keys, from the defaults) has a range
+    /// that holds its default and every builtin's value.
+    #[test]
+    fn every_number_has_a_range() {
+        let all = toml::Value::try_from(Scenario::default()).unwrap();
+        let mut keys = 0;
+        bounds::walk_numbers(&all, "", &mut |key, _| {
+            keys += 1;
+            assert!(
+                bounds::range_of(RANGES, key).is_some(),
+                "{key} has no range"
+            );
+        });
+        assert!(keys > 60);
+        bounds::check(&all, RANGES).unwrap();
+        for (_, key) in RANGES.iter().enumerate().map(|(i, (k, _))| (i, k)) {
+            assert!(
+                RANGES.iter().filter(|(k, _)| k == key).count() == 1,
+                "{key} twice"
+            );
+        }
+    }
+
+    /// The issue's reproducers (issue 16): refused naming the file, the key
+    /// and the range.
+    #[test]
+    fn the_reproducers_are_refused() {
+        let cases = [
+            (
+                "[drogue]\nstruts = 4294967295\n",
+                "drogue.struts",
+                "[0, 64]",
+            ),
+            (
+                "[drogue]\ntrail_offset_m = [1e300, 0.0, 0.0]\n",
+                "drogue.trail_offset_m",
+                "[-1000, 1000]",
+            ),
+            (
+                "[tanker]\naltitude_m = nan\n",
+                "tanker.altitude_m",
+                "[609.6, 25000]",
+            ),
+            (
+                "[tanker]\nheading_deg = nan\n",
+                "tanker.heading_deg",
+                "[-360, 360]",
+            ),
+            (
+                "[mount]\npitch_deg = nan\n",
+                "mount.pitch_deg",
+                "[-360, 360]",
+            ),
+            (
+                "[camera]\ndistortion = [1e300, 0.0, 0.0, 0.0, 0.0]\n",
+                "camera.distortion",
+                "[-100, 100]",
+            ),
+            ("fps = inf\n", "fps", "(0, 1000]"),
+        ];
+        for (text, key, range) in cases {
+            let e = Scenario::from_toml_str(text, "s.toml")
+                .unwrap_err()
+                .to_string();
+            assert!(
+                e.starts_with("s.toml: key `") && e.contains(key) && e.contains(range),
+                "{text}: {e}"
+            );
+        }
+    }
+
+    /// A camera file with absurd intrinsics is refused by name.
+    #[test]
+    fn a_camera_file_out_of_range_is_refused() {
+        let dir = std::env::temp_dir().join(format!("scenario-cam-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let cam = "image_width: 640\nimage_height: 480\ncamera_matrix:\n  rows: 3\n  cols: 3\n  data: [500.0, 0.0, 320.0, 0.0, 500.0, 240.0, 0.0, 0.0, 1.0]\ndistortion_model: plumb_bob\ndistortion_coefficients:\n  rows: 1\n  cols: 5\n  data: [1.0e300, 0.0, 0.0, 0.0, 0.0]\n";
+        std::fs::write(dir.join("cam.yaml"), cam).unwrap();
+        std::fs::write(dir.join("s.toml"), "[camera]\nfile = \"cam.yaml\"\n").unwrap();
+        let e = Scenario::load(&dir.join("s.toml")).unwrap_err().to_string();
+        assert!(
+            e.contains("camera.distortion") && e.contains("[-100, 100]"),
+            "{e}"
+        );
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    /// Random values, finite or not, for every number of a scenario: an
+    /// answer (never a panic), and only in-range values accepted.
+    #[test]
+    fn random_values_for_every_number_are_accepted_in_range_or_refused() {
+        use proptest::prelude::*;
+        use proptest::test_runner::{Config as PropConfig, TestRunner};
+        let all = toml::Value::try_from(Scenario::default()).unwrap();
+        let mut keys: Vec<(String, usize)> = Vec::new();
+        bounds::walk_numbers(
+            &all,
+            "",
+            &mut |key, _| match keys.iter_mut().find(|(k, _)| k == key) {
+                Some((_, n)) => *n += 1,
+                None => keys.push((key.to_string(), 1)),
+            },
+        );
+        let value = prop_oneof![
+            Just(f64::NAN),
+            Just(f64::INFINITY),
+            Just(f64::NEG_INFINITY),
+            Just(0.0),
+            Just(1e300),
+            -2000.0..2000.0f64,
+            any::<f64>(),
+        ];
+        let mut runner = TestRunner::new(PropConfig::with_cases(512));
+        runner
+            .run(&(0..keys.len(), value, any::<bool>()), |(i, x, as_int)| {
+                let (key, n) = &keys[i];
+                let number = if as_int && x.is_finite() && x.abs() < 9e18 {
+                    format!("{}", x.trunc() as i64)
+                } else {
+                    toml::Value::Float(x).to_string()
+                };
+                let value = if *n > 1 {
+                    format!("[{}]", vec![number.clone(); *n].join(", "))
+                } else {
+                    number.clone()
+                };
+                let text = match key.split_once('.') {
+                    Some((section, name)) => format!("[{section}]\n{name} = {value}\n"),
+                    None => format!("{key} = {value}\n"),
+                };
+                match Scenario::from_toml_str(&text, "p.toml") {
+                    Ok(_) => {
+                        let v: f64 = number.parse().unwrap();
+                        let r = bounds::range_of(RANGES, key).unwrap();
+                        prop_assert!(r.contains(v), "{text} accepted");
+                    }
+                    Err(e) => prop_assert!(e.to_string().starts_with("p.toml: key `"), "{e}"),
+                }
+                Ok(())
+            })
+            .unwrap();
     }
 
     #[test]

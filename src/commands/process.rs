@@ -4,7 +4,7 @@
 use crate::camera::CameraModel;
 use crate::config::Config;
 use crate::frame::{Frame, FrameOrigin};
-use crate::image_io::read_gray8;
+use crate::image_io::{check_frame_size, read_gray8};
 use crate::log::FlightLog;
 use crate::log::replay::{self, ReplayReader};
 use crate::measure::Measurer;
@@ -112,12 +112,13 @@ fn open_input(args: &ProcessArgs) -> Result<(NamedFrames, CameraModel, usize, u6
             given_camera.ok_or_else(|| setup("a folder of images needs --camera".into()))?;
         let (images, skipped) = list_images(&args.input).map_err(|e| setup(e.to_string()))?;
         let total = images.len() as u64;
-        let frames = images.into_iter().enumerate().map(|(seq, path)| {
+        let size = Some((camera.width, camera.height));
+        let frames = images.into_iter().enumerate().map(move |(seq, path)| {
             let name = path
                 .file_name()
                 .map(|n| n.to_string_lossy().into_owned())
                 .unwrap_or_default();
-            let frame = read_gray8(&path).map(|image| Frame {
+            let frame = read_gray8(&path, size).map(|image| Frame {
                 seq: seq as u64,
                 capture_time_ns: seq as u64 * FOLDER_FRAME_PERIOD_NS,
                 image,
@@ -197,6 +198,8 @@ pub fn run(args: &ProcessArgs) -> Result<ProcessSummary, ProcessError> {
     };
     let mut measure_time = std::time::Duration::ZERO;
     for (name, item) in frames {
+        // Frames are sized by the calibration (a log's, or --camera).
+        let item = item.and_then(|f| check_frame_size(&f.image, measurer.camera()).map(|()| f));
         let record = match item {
             Err(e) => {
                 summary.unreadable += 1;

@@ -542,6 +542,9 @@ pub fn run(
     }
     let mut frames_in = open_frames(&spec, vehicle_pose, args, &config)?;
     let camera = choose_camera(frames_in.source(), args, &config)?;
+    if let Frames::Source(s) = &mut frames_in {
+        s.expect_size(camera.width, camera.height);
+    }
     // The first frame is read before anything starts (link, log files): a
     // calibration of another size is refused with exit status 2.
     let mut first_item = match &mut frames_in {
@@ -609,6 +612,10 @@ pub fn run(
     let event_log = log.clone();
     let vitals = Arc::new(Vitals::default());
     let event_vitals = Arc::clone(&vitals);
+    // Received messages wait while the log's queue is half full: camera
+    // frames and measurements are never dropped for them (counted in the
+    // link stats as unlogged_incoming).
+    let busy_depth = (config.log.queue_len as u64).div_ceil(2);
     let events_done = Arc::new(AtomicBool::new(false));
     let events_done_flag = Arc::clone(&events_done);
     let event_thread = std::thread::spawn(move || {
@@ -624,6 +631,10 @@ pub fn run(
                         let ms = ev.time_ns.saturating_sub(captured) as f64 * 1e-6;
                         latency_ms.add(ms);
                         event_vitals.set_latency_ms(ms.max(1e-6));
+                    }
+                    if !ev.outgoing && event_log.queue_depth() >= busy_depth {
+                        events.skip_incoming();
+                        continue;
                     }
                     event_log.mavlink(ev);
                 }
@@ -702,7 +713,9 @@ pub fn run(
         frames += 1;
         meters.frames_in.fetch_add(1, Ordering::Relaxed);
         vitals.frames.fetch_add(1, Ordering::Relaxed);
-        let mut frame = match item {
+        let checked =
+            item.and_then(|f| crate::image_io::check_frame_size(&f.image, &camera).map(|()| f));
+        let mut frame = match checked {
             Ok(f) => f,
             Err(e) => {
                 unreadable += 1;
@@ -710,11 +723,6 @@ pub fn run(
                 continue;
             }
         };
-        if let Err(e) = camera.check_frame_size(frame.image.width(), frame.image.height()) {
-            unreadable += 1;
-            tracing::warn!(seq = frame.seq, "frame skipped: {e}");
-            continue;
-        }
         if paced && matches!(frames_in, Frames::Source(_)) {
             frame.capture_time_ns = pacer.wait_until_due(frame.capture_time_ns, frame.seq);
         }

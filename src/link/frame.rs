@@ -6,6 +6,14 @@
 //! are found and checked here with the crate's CRC, signature and payload
 //! code. Memory is bounded: the buffer never holds more than [`BUFFER_CAP`]
 //! bytes, whatever arrives.
+//!
+//! Work is bounded too: a CRC is computed only over a start that passes the
+//! cheap header checks (a known message id; MAVLink 1: exactly that message's
+//! payload length; MAVLink 2: valid flags and a payload of at least one
+//! byte). A flood of magic bytes (0xFE, 0xFD) fails those checks at once, so
+//! it costs a few comparisons per byte, not a CRC over up to 280 bytes at
+//! each marker ([`DecodeCounts::crc_bytes`] counts the CRC work; a test holds
+//! it at zero for such floods).
 
 use mavlink::dialects::ardupilotmega::MavMessage;
 use mavlink::{MAVLinkV2MessageRaw, MavHeader, MavlinkVersion, Message, SigningData};
@@ -38,6 +46,8 @@ pub struct DecodeCounts {
     pub mavlink1: u64,
     pub bad_signature: u64,
     pub bad_payload: u64,
+    /// Bytes run through a CRC (accepted or not): the decoder's work.
+    pub crc_bytes: u64,
 }
 
 enum Candidate {
@@ -55,8 +65,26 @@ fn known_id(id: u32) -> bool {
     MavMessage::all_ids().binary_search(&id).is_ok()
 }
 
+/// MAVLink 1 payload length of each known message id (ids 0..=255; 0: not
+/// a message MAVLink 1 can carry). MAVLink 1 never truncates payloads, so a
+/// frame is only plausible with exactly this length.
+fn v1_len(id: u8) -> usize {
+    static LENS: std::sync::OnceLock<[u8; 256]> = std::sync::OnceLock::new();
+    let lens = LENS.get_or_init(|| {
+        let mut lens = [0u8; 256];
+        let mut buf = [0u8; 255];
+        for id in 0..=255u32 {
+            if let Some(m) = MavMessage::default_message_from_id(id) {
+                lens[id as usize] = u8::try_from(m.ser(MavlinkVersion::V1, &mut buf)).unwrap_or(0);
+            }
+        }
+        lens
+    });
+    usize::from(lens[usize::from(id)])
+}
+
 /// Judges the bytes at the start of `b` (which start with a marker).
-fn candidate(b: &[u8]) -> Candidate {
+fn candidate(b: &[u8], counts: &mut DecodeCounts) -> Candidate {
     match b[0] {
         STX_V2 => {
             if b.len() < V2_HEADER {
@@ -67,6 +95,10 @@ fn candidate(b: &[u8]) -> Candidate {
                 return Candidate::Invalid;
             }
             let len = b[1] as usize;
+            // MAVLink 2 keeps at least one payload byte when it truncates.
+            if len == 0 {
+                return Candidate::Invalid;
+            }
             let sig = if flags & IFLAG_SIGNED != 0 {
                 SIGNATURE_LEN
             } else {
@@ -82,6 +114,7 @@ fn candidate(b: &[u8]) -> Candidate {
             }
             let crc_at = V2_HEADER + len;
             let crc = u16::from_le_bytes([b[crc_at], b[crc_at + 1]]);
+            counts.crc_bytes += crc_at as u64;
             if mavlink::calculate_crc(&b[1..crc_at], MavMessage::extra_crc(id)) == crc {
                 Candidate::V2(total)
             } else {
@@ -95,7 +128,7 @@ fn candidate(b: &[u8]) -> Candidate {
             let len = b[1] as usize;
             let total = V1_HEADER + len + CRC_LEN;
             let id = u32::from(b[5]);
-            if !known_id(id) {
+            if !known_id(id) || len != v1_len(b[5]) {
                 return Candidate::Invalid;
             }
             if b.len() < total {
@@ -103,6 +136,7 @@ fn candidate(b: &[u8]) -> Candidate {
             }
             let crc_at = V1_HEADER + len;
             let crc = u16::from_le_bytes([b[crc_at], b[crc_at + 1]]);
+            counts.crc_bytes += crc_at as u64;
             if mavlink::calculate_crc(&b[1..crc_at], MavMessage::extra_crc(id)) == crc {
                 Candidate::V1(total)
             } else {
@@ -171,7 +205,7 @@ impl FrameDecoder {
             };
             counts.bad_bytes += off as u64;
             pos += off;
-            match candidate(&self.buf[pos..]) {
+            match candidate(&self.buf[pos..], counts) {
                 Candidate::NeedMore if !flush => break,
                 Candidate::NeedMore | Candidate::Invalid => {
                     counts.bad_bytes += 1;
@@ -409,7 +443,7 @@ mod tests {
         let mut frames = 0u64;
         for &id in MavMessage::all_ids() {
             for _ in 0..4 {
-                let len: usize = rng.random_range(0..=255);
+                let len: usize = rng.random_range(1..=255);
                 let mut f = vec![STX_V2, len as u8, 0, 0, 0, 1, 1];
                 f.extend_from_slice(&id.to_le_bytes()[..3]);
                 f.extend((0..len).map(|_| rng.random::<u8>()));
@@ -421,6 +455,47 @@ mod tests {
         }
         assert_eq!(c.accepted + c.bad_payload, frames);
         assert_eq!(out.len() as u64, c.accepted);
+    }
+
+    /// The MAVLink 1 lengths are the crate's own: a V1 frame the crate
+    /// writes is recognised (and refused as MAVLink 1), for many ids.
+    #[test]
+    fn v1_lengths_match_the_crate_writer() {
+        assert_eq!(v1_len(0), 9); // HEARTBEAT: 9 bytes in MAVLink 1
+        let (_, c) = decode(&crate_frame(MavlinkVersion::V1, 3), true);
+        assert_eq!((c.mavlink1, c.bad_bytes), (1, 0));
+    }
+
+    /// Floods of magic bytes cost no CRC at all, and arbitrary bytes cost a
+    /// bounded number of CRC bytes per input byte; frames after them decode.
+    #[test]
+    fn floods_cost_bounded_work() {
+        for magic in [STX_V1, STX_V2] {
+            let mut d = FrameDecoder::new();
+            let (mut out, mut c) = (Vec::new(), DecodeCounts::default());
+            for _ in 0..1000 {
+                d.feed(&[magic; 1400], true, None, &mut c, &mut out);
+            }
+            assert_eq!(c.crc_bytes, 0, "magic {magic:#x}");
+            assert_eq!(c.bad_bytes, 1_400_000);
+            d.feed(
+                &crate_frame(MavlinkVersion::V2, 1),
+                true,
+                None,
+                &mut c,
+                &mut out,
+            );
+            assert_eq!(out.len(), 1);
+        }
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
+        let mut d = FrameDecoder::new();
+        let (mut out, mut c) = (Vec::new(), DecodeCounts::default());
+        let bytes: Vec<u8> = (0..1_000_000).map(|_| rng.random()).collect();
+        d.feed(&bytes, true, None, &mut c, &mut out);
+        // About 2/256 of random bytes are markers, and few of those pass the
+        // header checks: far below one CRC byte per input byte.
+        assert!(c.crc_bytes < bytes.len() as u64 / 4, "{}", c.crc_bytes);
     }
 
     #[test]

@@ -116,6 +116,8 @@ pub struct LinkConfig {
     pub target_relative_std_floor_m: f64,
     /// TARGET_RELATIVE: the clock of `timestamp`.
     pub target_relative_clock: TimeClock,
+    /// Most received messages logged per second; the rest are counted.
+    pub log_incoming_max_hz: f64,
 }
 
 /// A link that could not be started (bad address or configuration). Faults
@@ -245,7 +247,7 @@ impl Link {
         let telemetry = Arc::new(Mutex::new(telemetry::Telemetry::new(
             cfg.telemetry_tolerance_ms.saturating_mul(1_000_000),
         )));
-        let (events_tx, events_rx) = events::event_queue(cfg.event_queue);
+        let (events_tx, events_rx) = events::event_queue(cfg.event_queue, cfg.log_incoming_max_hz);
         // A few pose messages at most wait here: the connection task drains
         // it at once, and drops what is stale when it was away.
         let (out_tx, out_rx) = mpsc::channel(16);
@@ -307,7 +309,10 @@ impl LinkHandle {
 
     /// Counters and health, see [`LinkStats`].
     pub fn stats(&self) -> LinkStats {
-        self.shared.counters.snapshot(self.shared.events.dropped())
+        self.shared.counters.snapshot(
+            self.shared.events.dropped(),
+            self.shared.events.unlogged_incoming(),
+        )
     }
 
     /// Stops sending at once (nothing is written after this returns) and ends

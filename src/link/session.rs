@@ -17,6 +17,10 @@ use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 use tokio::sync::{mpsc, watch};
 use tokio::time::{MissedTickBehavior, interval, sleep_until, timeout};
 
+/// Most bytes read from a stream transport per turn of the connection loop
+/// (a datagram is read whole, up to this size: MAVLink frames are smaller).
+const READ_CHUNK: usize = 4096;
+
 /// What both tasks share.
 #[derive(Clone)]
 pub(crate) struct Context {
@@ -200,8 +204,14 @@ impl RateLimit {
             return None;
         }
         self.refill(now);
-        (self.tokens < 1.0)
-            .then(|| now + Duration::from_secs_f64((1.0 - self.tokens) / self.rate_hz))
+        // The config keeps the rate within [0.1, 10000] Hz; the wait is
+        // bounded anyway, so no rate can make this overflow (issue 16).
+        (self.tokens < 1.0).then(|| {
+            let wait = Duration::try_from_secs_f64((1.0 - self.tokens) / self.rate_hz)
+                .unwrap_or(Duration::MAX)
+                .min(Duration::from_secs(10));
+            now + wait
+        })
     }
 
     fn spend(&mut self, now: tokio::time::Instant) {
@@ -331,30 +341,15 @@ impl Connection {
         let is_serial = matches!(transport, Transport::Serial(_));
         let mut decoder = FrameDecoder::new();
         let mut incoming = Vec::new();
-        let mut buf = vec![0u8; 4096];
+        let mut buf = vec![0u8; READ_CHUNK];
         loop {
+            // Biased, with the input last: each turn of this loop reads at
+            // most one datagram or READ_CHUNK bytes, and the pose messages,
+            // heartbeat and TIMESYNC are served before it, so no inbound
+            // flood can hold the output back.
             tokio::select! {
                 biased;
                 _ = shutdown.changed() => return End::Shutdown,
-                r = transport.read(&mut buf) => match r {
-                    Ok(0) if !datagram => return End::Fault("peer closed the connection".into()),
-                    Ok(n) => {
-                        let mut counts = DecodeCounts::default();
-                        decoder.feed(&buf[..n], datagram, self.signing.as_ref(), &mut counts, &mut incoming);
-                        self.count(&counts);
-                        for msg in incoming.drain(..) {
-                            if let Err(e) = self.handle(&mut transport, msg).await {
-                                return e;
-                            }
-                        }
-                    }
-                    // A UDP error (e.g. ICMP unreachable) is not fatal: keep the socket.
-                    Err(e) if datagram => {
-                        bump(&self.ctx.counters.io_errors, 1);
-                        tracing::debug!("mavlink udp receive: {e}");
-                    }
-                    Err(e) => return End::Fault(format!("read: {e}")),
-                },
                 o = out.recv() => match o {
                     Some(o) => {
                         if self.ctx.is_stale(o.capture_time_ns, unix_now_ns()) {
@@ -394,7 +389,47 @@ impl Connection {
                         return End::Fault("autopilot heartbeat lost on the serial port".into());
                     }
                 }
+                r = transport.read(&mut buf) => match r {
+                    Ok((0, _)) if !datagram => return End::Fault("peer closed the connection".into()),
+                    Ok((n, from)) => {
+                        let mut counts = DecodeCounts::default();
+                        decoder.feed(&buf[..n], datagram, self.signing.as_ref(), &mut counts, &mut incoming);
+                        self.count(&counts);
+                        if let Some(from) = from {
+                            self.follow_peer(&mut transport, from, &incoming);
+                        }
+                        for msg in incoming.drain(..) {
+                            if let Err(e) = self.handle(&mut transport, msg).await {
+                                return e;
+                            }
+                        }
+                    }
+                    // A UDP error (e.g. ICMP unreachable) is not fatal: keep the socket.
+                    Err(e) if datagram => {
+                        bump(&self.ctx.counters.io_errors, 1);
+                        tracing::debug!("mavlink udp receive: {e}");
+                    }
+                    Err(e) => return End::Fault(format!("read: {e}")),
+                },
             }
+        }
+    }
+
+    /// `udpin`: follows `from` when its datagram held a frame the decoder
+    /// accepted, and that frame was signed (and verified) if signing is on;
+    /// each change of peer is logged.
+    fn follow_peer(&self, transport: &mut Transport, from: std::net::SocketAddr, got: &[Incoming]) {
+        let trusted = got.iter().any(|m| m.signed || self.signing.is_none());
+        if !trusted {
+            return;
+        }
+        match transport.follow(from) {
+            Some(None) => tracing::info!(peer = %from, "mavlink udpin: replying to {from}"),
+            Some(Some(old)) => {
+                bump(&self.ctx.counters.peer_changes, 1);
+                tracing::warn!(peer = %from, previous = %old, "mavlink udpin: peer changed from {old} to {from}");
+            }
+            None => {}
         }
     }
 
@@ -475,19 +510,21 @@ impl Connection {
         if from_system == u32::from(cfg.system_id) && from_component == cfg.component_id {
             return Ok(());
         }
-        let mut fields = messages::fields_json(&m.message);
-        if let Some(obj) = fields.as_object_mut() {
-            obj.insert("sysid".into(), from_system.into());
-            obj.insert("compid".into(), from_component.into());
-            obj.insert("seq".into(), m.header.sequence.into());
-            obj.insert("signed".into(), m.signed.into());
-        }
-        self.ctx.events.push(LinkEvent {
-            time_ns: now_ns,
-            outgoing: false,
-            name: m.message.message_name().to_string(),
-            capture_time_ns: None,
-            fields,
+        self.ctx.events.push_incoming(|| {
+            let mut fields = messages::fields_json(&m.message);
+            if let Some(obj) = fields.as_object_mut() {
+                obj.insert("sysid".into(), from_system.into());
+                obj.insert("compid".into(), from_component.into());
+                obj.insert("seq".into(), m.header.sequence.into());
+                obj.insert("signed".into(), m.signed.into());
+            }
+            LinkEvent {
+                time_ns: now_ns,
+                outgoing: false,
+                name: m.message.message_name().to_string(),
+                capture_time_ns: None,
+                fields,
+            }
         });
         let from_autopilot = from_system == u32::from(cfg.system_id);
         match &m.message {

@@ -46,6 +46,11 @@ pub struct LinkStats {
     pub dropped_outgoing: u64,
     /// Events dropped because the `events()` consumer was too slow.
     pub dropped_events: u64,
+    /// Received messages not logged: over `[link] log_incoming_max_hz`, or
+    /// skipped while the flight log's queue was busy (frames come first).
+    pub unlogged_incoming: u64,
+    /// `udpin`: times the peer changed after the first (each is logged).
+    pub peer_changes: u64,
     /// Age of the last autopilot heartbeat, seconds; negative: never seen.
     /// Only a HEARTBEAT of the configured system id that names an autopilot
     /// and is not a ground station's or an onboard controller's counts.
@@ -80,6 +85,7 @@ pub(crate) struct Counters {
     pub no_vehicle_pose: AtomicU64,
     pub invalid_measurement: AtomicU64,
     pub dropped_outgoing: AtomicU64,
+    pub peer_changes: AtomicU64,
     pub connected: std::sync::atomic::AtomicBool,
     pub opened: std::sync::atomic::AtomicBool,
     pub timesync_offset_ns: std::sync::atomic::AtomicI64,
@@ -141,7 +147,7 @@ impl Counters {
         *lock(&self.last_heartbeat)
     }
 
-    pub fn snapshot(&self, dropped_events: u64) -> LinkStats {
+    pub fn snapshot(&self, dropped_events: u64, unlogged_incoming: u64) -> LinkStats {
         let get = |c: &AtomicU64| c.load(Ordering::Relaxed);
         LinkStats {
             sent: lock(&self.sent).clone(),
@@ -160,6 +166,8 @@ impl Counters {
             invalid_measurement: get(&self.invalid_measurement),
             dropped_outgoing: get(&self.dropped_outgoing),
             dropped_events,
+            unlogged_incoming,
+            peer_changes: get(&self.peer_changes),
             last_heartbeat_age_s: self
                 .last_heartbeat()
                 .map_or(-1.0, |t| t.elapsed().as_secs_f64()),

@@ -1,5 +1,12 @@
 //! The byte transports under the link: UDP (out, in, broadcast), TCP
 //! (client, server), serial.
+//!
+//! `udpin` replies to its peer, and the peer is chosen by the session, not
+//! by whoever sent the last datagram: [`Transport::read`] reports the sender,
+//! and the session calls [`Transport::follow`] only for a sender whose
+//! datagram held a well-formed MAVLink 2 frame (signed and verified when
+//! signing is on). A stray or hostile datagram cannot divert the poses.
+//! `udpbcast` locks on to the first such sender the same way.
 
 use super::address::Address;
 use std::io;
@@ -11,11 +18,11 @@ use tokio_serial::SerialPortBuilderExt;
 pub(crate) enum Transport {
     Udp {
         socket: UdpSocket,
-        /// Where to send; for `udpin`, whoever sent last.
+        /// Where to send; for `udpin`, the sender of the last accepted frame.
         peer: Option<SocketAddr>,
-        /// `udpin`: follow the sender of the last datagram.
+        /// `udpin`: the peer may change (see [`Transport::follow`]).
         follow_sender: bool,
-        /// `udpbcast`: the first datagram's sender becomes the peer
+        /// `udpbcast`: the first accepted sender becomes the peer
         /// (pymavlink's lock-on); cleared once locked.
         lock_on_reply: bool,
     },
@@ -103,26 +110,38 @@ impl Transport {
         matches!(self, Self::Udp { .. })
     }
 
-    /// Reads what is available. `Ok(0)` on a stream: the peer hung up.
-    pub async fn read(&mut self, buf: &mut [u8]) -> io::Result<usize> {
+    /// Reads what is available, and who sent it (UDP). `Ok((0, _))` on a
+    /// stream: the peer hung up.
+    pub async fn read(&mut self, buf: &mut [u8]) -> io::Result<(usize, Option<SocketAddr>)> {
+        match self {
+            Self::Udp { socket, .. } => {
+                let (n, from) = socket.recv_from(buf).await?;
+                Ok((n, Some(from)))
+            }
+            Self::Tcp(s) => s.read(buf).await.map(|n| (n, None)),
+            Self::Serial(s) => s.read(buf).await.map(|n| (n, None)),
+        }
+    }
+
+    /// `udpin`: replies go to `from` from now on. Returns the peer it
+    /// replaces (`Some(None)`: the first peer) when the peer changed; `None`
+    /// when it did not, or when this transport does not follow senders.
+    pub fn follow(&mut self, from: SocketAddr) -> Option<Option<SocketAddr>> {
         match self {
             Self::Udp {
-                socket,
                 peer,
-                follow_sender,
+                follow_sender: true,
+                ..
+            } if *peer != Some(from) => Some(peer.replace(from)),
+            Self::Udp {
+                peer,
                 lock_on_reply,
-            } => {
-                let (n, from) = socket.recv_from(buf).await?;
-                if *follow_sender {
-                    *peer = Some(from);
-                } else if *lock_on_reply {
-                    *peer = Some(from);
-                    *lock_on_reply = false;
-                }
-                Ok(n)
+                ..
+            } if *lock_on_reply => {
+                *lock_on_reply = false;
+                Some(peer.replace(from))
             }
-            Self::Tcp(s) => s.read(buf).await,
-            Self::Serial(s) => s.read(buf).await,
+            _ => None,
         }
     }
 

@@ -30,9 +30,12 @@ use std::fs::File;
 use std::io::{BufReader, BufWriter, Read, Seek, SeekFrom, Write};
 use std::path::{Path, PathBuf};
 
-/// Largest record the reader accepts: a frame far above any camera's, so a
-/// corrupt length cannot make it allocate without bound.
-pub const RECORD_LIMIT_BYTES: usize = 512 << 20;
+/// Largest record the reader accepts: a raw mono8 frame of 5792x5792, far
+/// above any camera this runs with. A corrupt or hostile length beyond it
+/// ends the reading with an error before anything is allocated for it (a
+/// 109-byte file claiming a 400 MiB record costs nothing), so replay and
+/// recover stay within a few frames' worth of memory.
+pub const RECORD_LIMIT_BYTES: usize = 32 << 20;
 
 /// Name of the metadata record that lists what a recovery found damaged.
 pub const RECOVER_METADATA: &str = "drogue_vision.recover";

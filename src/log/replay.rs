@@ -73,9 +73,8 @@ impl ReplayReader {
                         c.format
                     ));
                 }
-                image::load_from_memory_with_format(&c.data, image::ImageFormat::Png)
+                crate::image_io::decode_gray8(&c.data, Some(image::ImageFormat::Png), None)
                     .map_err(|e| format!("PNG: {e}"))?
-                    .into_luma8()
             }
             other => return Err(format!("{}: schema {other:?}", topics::IMAGE)),
         };

@@ -485,10 +485,20 @@ impl Writer {
     fn fail(&mut self, message: String) {
         self.summary.write_errors += 1;
         if let Some(file) = self.file.take() {
+            let (path, empty) = (file.path.clone(), file.bytes == 0);
             // Dropping the mcap writer tries to finish the file; after an I/O
             // error that fails quietly, which is fine: the file is recovered
             // at the next start-up.
             drop(file);
+            if empty {
+                // Not one message got in (a retry on a disk still full):
+                // leave no empty file behind, and reuse its part number.
+                let _ = self.storage.remove(&path);
+                if self.summary.files.last() == Some(&path) {
+                    self.summary.files.pop();
+                    self.next_part -= 1;
+                }
+            }
         }
         self.retry_at = Some(Instant::now() + Duration::from_secs(self.cfg.retry_after_error_s));
         self.report(

@@ -35,6 +35,8 @@ pub fn list_images(dir: &Path) -> Result<(Vec<PathBuf>, usize), SourceError> {
 pub struct DirSource {
     images: std::vec::IntoIter<PathBuf>,
     seq: u64,
+    /// The camera's frame size, once known.
+    expected: Option<(u32, u32)>,
 }
 
 impl DirSource {
@@ -43,6 +45,7 @@ impl DirSource {
         Ok(Self {
             images: images.into_iter(),
             seq: 0,
+            expected: None,
         })
     }
 }
@@ -65,12 +68,15 @@ impl FrameSource for DirSource {
     fn fps(&self) -> Option<f64> {
         None
     }
+    fn expect_size(&mut self, width: u32, height: u32) {
+        self.expected = Some((width, height));
+    }
     fn next_frame(&mut self) -> Option<SourceItem> {
         let path = self.images.next()?;
         let seq = self.seq;
         self.seq += 1;
         Some(
-            read_gray8(&path)
+            read_gray8(&path, self.expected)
                 .map(|image| Frame {
                     seq,
                     capture_time_ns: unix_now_ns(),

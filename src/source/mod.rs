@@ -90,6 +90,11 @@ pub trait FrameSource: Send {
     fn provenance(&self) -> Vec<(String, String)> {
         Vec::new()
     }
+
+    /// The camera's frame size, once the camera is chosen: a source that
+    /// decodes files refuses other sizes from their headers (see
+    /// [`crate::image_io`]). The others' frames are checked by the caller.
+    fn expect_size(&mut self, _width: u32, _height: u32) {}
     /// The next frame; `None` at the end of the source.
     fn next_frame(&mut self) -> Option<SourceItem>;
 }

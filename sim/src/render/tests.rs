@@ -528,3 +528,21 @@ fn without_drogue_leaves_the_sky() {
     scene.drogue.centre = V3::new(100.0, 0.0, 5.0);
     assert_eq!(r.render(&scene), empty);
 }
+
+/// The blur a frame can ask for is bounded (issue 16: a drogue placed at
+/// 1e300 m hung the renderer in its blur): a non-finite blur is none, and a
+/// longer one than the image's diagonal is that long.
+#[test]
+fn the_blur_is_bounded() {
+    assert_eq!(super::bounded_blur([f64::NAN, 1.0], 640, 480), [0.0, 0.0]);
+    assert_eq!(
+        super::bounded_blur([f64::INFINITY, 0.0], 640, 480),
+        [0.0, 0.0]
+    );
+    let b = super::bounded_blur([1e300, 1e300], 640, 480);
+    assert!(
+        ((b[0] * b[0] + b[1] * b[1]).sqrt() - 800.0).abs() < 1e-9,
+        "{b:?}"
+    );
+    assert_eq!(super::bounded_blur([3.0, -4.0], 640, 480), [3.0, -4.0]);
+}

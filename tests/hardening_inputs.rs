@@ -1,0 +1,419 @@
+//! Hostile input from files and the command line (issue 16): each of the
+//! issue's reproducers is now refused with exit status 2 naming the file, the
+//! key and the allowed range, or read as the unreadable frame it is; image
+//! bombs and a lying MCAP stay within 64 MB of peak memory (measured by the
+//! kernel, wait4's ru_maxrss of the child); a sample of random configs runs
+//! the binary to exit 0 or 2 in bounded time.
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
+
+const BIN: &str = env!("CARGO_BIN_EXE_drogue-vision");
+
+/// How a child process ended.
+struct Outcome {
+    code: Option<i32>,
+    stderr: String,
+    max_rss_kib: i64,
+}
+
+/// Runs the binary with `args`, killed after `limit`; its exit status,
+/// stderr and peak resident memory (the kernel's, for this child only).
+/// The child is reaped by `wait4` (for its rusage), not by `Child::wait`.
+#[allow(clippy::zombie_processes)]
+fn run(args: &[&str], cwd: &Path, limit: Duration) -> Outcome {
+    let stderr_path = cwd.join(format!("stderr-{}.txt", std::process::id()));
+    let child = Command::new(BIN)
+        .args(args)
+        .current_dir(cwd)
+        .stdin(Stdio::null())
+        .stdout(Stdio::null())
+        .stderr(std::fs::File::create(&stderr_path).unwrap())
+        .spawn()
+        .unwrap();
+    let pid = child.id() as libc::pid_t;
+    let started = Instant::now();
+    let mut status = 0;
+    // SAFETY: a zeroed rusage is a valid value for wait4 to fill.
+    let mut usage: libc::rusage = unsafe { std::mem::zeroed() };
+    loop {
+        // SAFETY: pid is our own child, the pointers are to live locals.
+        let r = unsafe { libc::wait4(pid, &mut status, libc::WNOHANG, &mut usage) };
+        if r == pid {
+            break;
+        }
+        assert!(r == 0, "wait4 failed");
+        if started.elapsed() > limit {
+            // SAFETY: signalling our own child.
+            unsafe { libc::kill(pid, libc::SIGKILL) };
+            // SAFETY: as above; reaps it.
+            unsafe { libc::wait4(pid, &mut status, 0, &mut usage) };
+            panic!("{args:?} still running after {limit:?}");
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let code = libc::WIFEXITED(status).then(|| libc::WEXITSTATUS(status));
+    let stderr = std::fs::read_to_string(&stderr_path).unwrap_or_default();
+    let _ = std::fs::remove_file(&stderr_path);
+    Outcome {
+        code,
+        stderr,
+        max_rss_kib: usage.ru_maxrss,
+    }
+}
+
+fn write(dir: &Path, name: &str, text: &str) -> PathBuf {
+    let p = dir.join(name);
+    std::fs::write(&p, text).unwrap();
+    p
+}
+
+/// Exit 2, and stderr names every one of `words`.
+fn assert_refused(o: &Outcome, words: &[&str]) {
+    assert_eq!(o.code, Some(2), "stderr: {}", o.stderr);
+    for w in words {
+        assert!(o.stderr.contains(w), "{w:?} not in: {}", o.stderr);
+    }
+}
+
+const SHORT: Duration = Duration::from_secs(60);
+
+#[test]
+fn config_reproducers_exit_2_naming_file_key_and_range() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let cases: [(&str, &[&str], &[&str]); 7] = [
+        (
+            "[link]\nmax_rate_hz = 1e-300\n",
+            &["run"],
+            &["[link] max_rate_hz", "0 or [0.1, 10000]"],
+        ),
+        (
+            "[run]\nvehicle_pose_timeout_s = 1e300\n",
+            &["run", "--vehicle-pose", "mavlink"],
+            &["[run] vehicle_pose_timeout_s", "(0, 86400]"],
+        ),
+        (
+            "[log]\nretry_after_error_s = 9223372036854775807\n",
+            &["run"],
+            &["[log] retry_after_error_s", "[1, 86400]"],
+        ),
+        (
+            "[fit]\nadaptive_subsets = 0\n",
+            &["run"],
+            &["[fit] adaptive_subsets", "[1, 1000]"],
+        ),
+        (
+            "[fit]\nadaptive_confidence = nan\n",
+            &["run"],
+            &["[fit] adaptive_confidence", "(0, 1)"],
+        ),
+        (
+            "[detect]\nthreshold_fractions = []\n",
+            &["run"],
+            &["threshold_fractions", "1 to 16"],
+        ),
+        (
+            "[detect]\nmax_candidates = 0\n",
+            &["run"],
+            &["[detect] max_candidates", "[1, 100]"],
+        ),
+    ];
+    for (text, command, words) in cases {
+        let cfg = write(d, "r.toml", text);
+        let cfg = cfg.to_str().unwrap();
+        let mut args = command.to_vec();
+        args.extend(["--config", cfg, "--max-frames", "2", "--log-dir", "logs"]);
+        let o = run(&args, d, SHORT);
+        let mut all = words.to_vec();
+        all.push(cfg);
+        assert_refused(&o, &all);
+    }
+}
+
+#[test]
+fn scenario_reproducers_exit_2_naming_file_key_and_range() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let cases: [(&str, &[&str]); 5] = [
+        (
+            "[drogue]\nstruts = 4294967295\n",
+            &["drogue.struts", "[0, 64]"],
+        ),
+        (
+            "[drogue]\ntrail_offset_m = [1e300, 0.0, 0.0]\n",
+            &["drogue.trail_offset_m", "[-1000, 1000]"],
+        ),
+        ("[tanker]\naltitude_m = nan\n", &["tanker.altitude_m"]),
+        ("[tanker]\nheading_deg = nan\n", &["tanker.heading_deg"]),
+        (
+            "[mount]\npitch_deg = nan\n",
+            &["mount.pitch_deg", "[-360, 360]"],
+        ),
+    ];
+    for (text, words) in cases {
+        let s = write(d, "s.toml", text);
+        let s = s.to_str().unwrap();
+        let o = run(
+            &["sim", "--scenario", s, "--out", "out", "--frames", "2"],
+            d,
+            SHORT,
+        );
+        let mut all = words.to_vec();
+        all.push(s);
+        assert_refused(&o, &all);
+    }
+}
+
+/// A camera file for `process`.
+fn camera_yaml(w: u32, h: u32, d0: &str) -> String {
+    format!(
+        "image_width: {w}\nimage_height: {h}\ncamera_name: t\ncamera_matrix:\n  rows: 3\n  cols: 3\n  \
+         data: [500.0, 0.0, {cx}, 0.0, 500.0, {cy}, 0.0, 0.0, 1.0]\ndistortion_model: plumb_bob\n\
+         distortion_coefficients:\n  rows: 1\n  cols: 5\n  data: [{d0}, 0.0, 0.0, 0.0, 0.0]\n",
+        cx = w / 2,
+        cy = h / 2
+    )
+}
+
+#[test]
+fn a_camera_file_with_absurd_distortion_exits_2() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    std::fs::create_dir(d.join("frames")).unwrap();
+    write(d, "cam.yaml", &camera_yaml(64, 48, "1.0e300"));
+    let o = run(
+        &[
+            "process", "frames", "--camera", "cam.yaml", "--out", "o.jsonl",
+        ],
+        d,
+        SHORT,
+    );
+    assert_refused(
+        &o,
+        &["cam.yaml", "distortion_coefficients.data[0]", "[-100, 100]"],
+    );
+}
+
+/// The simulator's first frame, as a JPEG, with its camera file.
+fn sim_frame(d: &Path) -> image::GrayImage {
+    let o = run(
+        &[
+            "sim",
+            "--scenario",
+            "approach",
+            "--out",
+            "sim",
+            "--frames",
+            "1",
+        ],
+        d,
+        SHORT,
+    );
+    assert_eq!(o.code, Some(0), "{}", o.stderr);
+    let png = std::fs::read_dir(d.join("sim"))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .find(|p| p.extension().is_some_and(|e| e == "png"))
+        .unwrap();
+    image::open(png).unwrap().into_luma8()
+}
+
+fn records(path: &Path) -> Vec<serde_json::Value> {
+    std::fs::read_to_string(path)
+        .unwrap()
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect()
+}
+
+/// A JPEG cut short is an unreadable frame (an error record), while the
+/// whole JPEG of the same frame is detected.
+#[test]
+fn a_truncated_jpeg_is_an_unreadable_frame() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let frame = sim_frame(d);
+    std::fs::create_dir(d.join("jpg")).unwrap();
+    let mut jpeg = std::io::Cursor::new(Vec::new());
+    frame.write_to(&mut jpeg, image::ImageFormat::Jpeg).unwrap();
+    let jpeg = jpeg.into_inner();
+    std::fs::write(d.join("jpg/a_whole.jpg"), &jpeg).unwrap();
+    std::fs::write(d.join("jpg/b_cut.jpg"), &jpeg[..jpeg.len() * 3 / 5]).unwrap();
+    let o = run(
+        &[
+            "process",
+            "jpg",
+            "--camera",
+            "sim/camera.yaml",
+            "--out",
+            "o.jsonl",
+            "--independent",
+        ],
+        d,
+        SHORT,
+    );
+    assert_eq!(o.code, Some(0), "{}", o.stderr);
+    let r = records(&d.join("o.jsonl"));
+    assert_eq!(r.len(), 2);
+    assert!(r[0]["detected"].as_bool().unwrap_or(false), "{}", r[0]);
+    let e = r[1]["error"].as_str().unwrap_or_default();
+    assert!(e.contains("ends early"), "{}", r[1]);
+}
+
+/// A frame of another size than the camera file's is unreadable, refused
+/// from its header.
+#[test]
+fn a_frame_of_the_wrong_size_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    std::fs::create_dir(d.join("frames")).unwrap();
+    image::GrayImage::new(80, 60)
+        .save(d.join("frames/a.png"))
+        .unwrap();
+    write(d, "cam.yaml", &camera_yaml(64, 48, "0.0"));
+    let o = run(
+        &[
+            "process", "frames", "--camera", "cam.yaml", "--out", "o.jsonl",
+        ],
+        d,
+        SHORT,
+    );
+    assert_eq!(o.code, Some(0), "{}", o.stderr);
+    let r = records(&d.join("o.jsonl"));
+    let e = r[0]["error"].as_str().unwrap_or_default();
+    assert!(e.contains("80x60") && e.contains("64x48"), "{}", r[0]);
+}
+
+/// A valid 20000 x 20000 gray PNG of a few hundred KB (zeros compress).
+fn png_bomb(path: &Path) {
+    let file = std::io::BufWriter::new(std::fs::File::create(path).unwrap());
+    let mut enc = png::Encoder::new(file, 20_000, 20_000);
+    enc.set_color(png::ColorType::Grayscale);
+    enc.set_depth(png::BitDepth::Eight);
+    enc.set_compression(png::Compression::Fast);
+    let mut w = enc.write_header().unwrap();
+    let mut s = w.stream_writer().unwrap();
+    let row = vec![0u8; 20_000];
+    for _ in 0..20_000 {
+        s.write_all(&row).unwrap();
+    }
+    s.finish().unwrap();
+}
+
+/// The largest peak memory the bombs may cost `process`, KiB (64 MB).
+const PEAK_LIMIT_KIB: i64 = 64 * 1000;
+
+#[test]
+fn image_bombs_and_a_lying_mcap_stay_under_64_mb() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    std::fs::create_dir(d.join("bomb")).unwrap();
+    png_bomb(&d.join("bomb/bomb.png"));
+    assert!(std::fs::metadata(d.join("bomb/bomb.png")).unwrap().len() < 5 << 20);
+    write(d, "cam.yaml", &camera_yaml(1280, 960, "0.0"));
+    // With the camera's size known: refused from the header.
+    let o = run(
+        &[
+            "process", "bomb", "--camera", "cam.yaml", "--out", "o.jsonl",
+        ],
+        d,
+        SHORT,
+    );
+    assert_eq!(o.code, Some(0), "{}", o.stderr);
+    let r = records(&d.join("o.jsonl"));
+    let e = r[0]["error"].as_str().unwrap_or_default();
+    assert!(e.contains("20000"), "{e}");
+    println!("png bomb: peak {} KiB", o.max_rss_kib);
+    assert!(o.max_rss_kib < PEAK_LIMIT_KIB, "{} KiB", o.max_rss_kib);
+
+    // 109 bytes: the MCAP magic, a header, and a message record claiming
+    // 400 MiB.
+    let mut lying = Vec::new();
+    lying.extend_from_slice(b"\x89MCAP0\r\n");
+    lying.push(0x01); // Header
+    lying.extend_from_slice(&8u64.to_le_bytes());
+    lying.extend_from_slice(&0u32.to_le_bytes()); // profile ""
+    lying.extend_from_slice(&0u32.to_le_bytes()); // library ""
+    lying.push(0x05); // Message
+    lying.extend_from_slice(&(400u64 << 20).to_le_bytes());
+    lying.resize(109, 0xAB);
+    std::fs::write(d.join("lying.mcap"), &lying).unwrap();
+    for args in [
+        &["process", "lying.mcap", "--out", "o2.jsonl"][..],
+        &[
+            "process",
+            "lying.mcap",
+            "--camera",
+            "cam.yaml",
+            "--out",
+            "o3.jsonl",
+        ][..],
+        &["recover", "lying.mcap", "--out", "fixed.mcap"][..],
+    ] {
+        let o = run(args, d, SHORT);
+        println!(
+            "lying mcap {args:?}: exit {:?}, peak {} KiB",
+            o.code, o.max_rss_kib
+        );
+        assert!(matches!(o.code, Some(0..=2)), "{}", o.stderr);
+        assert!(o.max_rss_kib < PEAK_LIMIT_KIB, "{} KiB", o.max_rss_kib);
+    }
+}
+
+/// Random values for random numbers of the config, through the binary: exit
+/// 0 or 2, each within a bounded time (the in-process property tests in
+/// `config.rs` cover every key with many more values).
+#[test]
+fn random_configs_through_the_binary_exit_0_or_2() {
+    use rand::{Rng, SeedableRng};
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(16);
+    let numbers: Vec<(&str, f64)> = drogue_vision::config::RANGES
+        .iter()
+        .map(|(k, r)| (*k, r.hi))
+        .collect();
+    let specials = [f64::NAN, f64::INFINITY, -1.0, 0.0, 1e300, 1e-300];
+    for i in 0..6 {
+        let (key, hi) = numbers[rng.random_range(0..numbers.len())];
+        let x = if i % 2 == 0 {
+            specials[rng.random_range(0..specials.len())]
+        } else {
+            rng.random_range(0.0..=hi.min(1e6))
+        };
+        let (section, name) = key.split_once('.').unwrap();
+        let default = drogue_vision::config::DEFAULT_TOML
+            .parse::<toml::Table>()
+            .unwrap();
+        let value = toml::Value::Float(x).to_string();
+        let value = match default[section][name].as_array() {
+            Some(a) => format!("[{}]", vec![value; a.len()].join(", ")),
+            None => value,
+        };
+        let text = format!("[{section}]\n{name} = {value}\n");
+        write(d, "r.toml", &text);
+        let o = run(
+            &[
+                "run",
+                "--config",
+                "r.toml",
+                "--max-frames",
+                "3",
+                "--fast",
+                "--log-dir",
+                "logs",
+            ],
+            d,
+            SHORT,
+        );
+        assert!(
+            matches!(o.code, Some(0) | Some(2)),
+            "{text}: exit {:?}: {}",
+            o.code,
+            o.stderr
+        );
+    }
+}
