@@ -125,7 +125,10 @@ fn reference_sets(c: &mut Criterion) {
             .filter(|p| p.extension().is_some_and(|x| x == "png"))
             .collect();
         names.sort();
-        let images: Vec<GrayImage> = names.iter().filter_map(|p| read_gray8(p).ok()).collect();
+        let images: Vec<GrayImage> = names
+            .iter()
+            .filter_map(|p| read_gray8(p, None).ok())
+            .collect();
         let mut times: Vec<f64> = images
             .iter()
             .map(|image| {

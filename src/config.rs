@@ -86,7 +86,10 @@ pub const RANGES: &[(&str, Range)] = &[
     ("track.canopy_min_difference", Range::closed(0.0, 1.0)),
     ("track.canopy_min_support", Range::closed(0.0, 1.0)),
     ("track.continuity_margin_deg", Range::closed(0.0, 90.0)),
-    ("track.continuity_max_gap_ms", Range::closed(0.0, 3_600_000.0)),
+    (
+        "track.continuity_max_gap_ms",
+        Range::closed(0.0, 3_600_000.0),
+    ),
     ("track.continuity_max_speed_mps", Range::closed(0.0, 1000.0)),
     ("link.system_id", Range::closed(1.0, 255.0)),
     ("link.component_id", Range::closed(1.0, 255.0)),
@@ -106,7 +109,10 @@ pub const RANGES: &[(&str, Range)] = &[
     ("link.event_queue", Range::closed(1.0, 1_000_000.0)),
     ("link.log_incoming_max_hz", Range::closed(1.0, 100_000.0)),
     ("link.target_relative_std_scale", Range::closed(1.0, 100.0)),
-    ("link.target_relative_std_floor_m", Range::closed(0.0, 100.0)),
+    (
+        "link.target_relative_std_floor_m",
+        Range::closed(0.0, 100.0),
+    ),
     ("log.rotate_size_mib", Range::closed(0.0, 1_048_576.0)),
     ("log.rotate_duration_s", Range::closed(0.0, 604_800.0)),
     ("log.queue_len", Range::closed(1.0, 100_000.0)),

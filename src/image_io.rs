@@ -33,6 +33,17 @@ fn alloc_limit(w: u32, h: u32) -> u64 {
     u64::from(w) * u64::from(h) * 9 + (1 << 20)
 }
 
+/// The words between the two sizes of a size-mismatch error: callers that
+/// must tell a frame of another size (a setup error) from an unreadable one
+/// look for them with [`is_size_mismatch`].
+const SIZE_MISMATCH: &str = ", the camera file's calibration is ";
+
+/// Whether an error of this module says the frame is not the camera file's
+/// size (rather than unreadable).
+pub fn is_size_mismatch(error: &str) -> bool {
+    error.contains(SIZE_MISMATCH)
+}
+
 /// Reads an image file as 8-bit gray: 16-bit samples are scaled to 8 bits,
 /// colour becomes luma, alpha is dropped. `expected`: the camera's frame
 /// size; another size is refused from the header.
@@ -78,9 +89,7 @@ pub fn decode_gray8(
     let (w, h) = head.into_dimensions().map_err(|e| e.to_string())?;
     match expected {
         Some((ew, eh)) if (w, h) != (ew, eh) => {
-            return Err(format!(
-                "image is {w}x{h}, the camera file's calibration is {ew}x{eh}"
-            ));
+            return Err(format!("image is {w}x{h}{SIZE_MISMATCH}{ew}x{eh}"));
         }
         None if w > MAX_SIDE_PX || h > MAX_SIDE_PX => {
             return Err(format!(
@@ -114,7 +123,7 @@ pub fn check_frame_size(image: &GrayImage, camera: &CameraModel) -> Result<(), S
         Ok(())
     } else {
         Err(format!(
-            "frame is {}x{}, the camera file's calibration is {}x{}",
+            "frame is {}x{}{SIZE_MISMATCH}{}x{}",
             image.width(),
             image.height(),
             camera.width,

@@ -76,7 +76,7 @@ fn measure_set(set: &Path) -> SetResult {
     let mut r = SetResult::default();
     for (seq, t) in truths(set).into_iter().enumerate() {
         let path = set.join(&t.frame);
-        let image = read_gray8(&path).expect("reference frame");
+        let image = read_gray8(&path, None).expect("reference frame");
         measurer.forget_track();
         let m = measurer.measure(&Frame {
             seq: seq as u64,

@@ -166,10 +166,13 @@ pub fn run(args: &ProcessArgs) -> Result<ProcessSummary, ProcessError> {
     // The first frame decides before anything is written: a calibration of
     // another size is refused (exit 2, no output files).
     let mut frames = frames.peekable();
-    if let Some((_, Ok(first))) = frames.peek() {
-        camera
+    match frames.peek() {
+        Some((_, Ok(first))) => camera
             .check_frame_size(first.image.width(), first.image.height())
-            .map_err(setup)?;
+            .map_err(setup)?,
+        // A folder's images are refused by their headers.
+        Some((_, Err(e))) if crate::image_io::is_size_mismatch(e) => return Err(setup(e.clone())),
+        _ => {}
     }
     let mount = Mount::from_config(&config.mount).map_err(setup)?;
     let camera_size = (camera.width, camera.height);

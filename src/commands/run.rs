@@ -551,10 +551,15 @@ pub fn run(
         Frames::Source(source) => source.next_frame(),
         Frames::ClosedLoop(_) => None,
     };
-    if let Some(Ok(first)) = &first_item {
-        camera
+    match &first_item {
+        Some(Ok(first)) => camera
             .check_frame_size(first.image.width(), first.image.height())
-            .map_err(RunError::Setup)?;
+            .map_err(RunError::Setup)?,
+        // A folder's images are refused by their headers.
+        Some(Err(e)) if crate::image_io::is_size_mismatch(e) => {
+            return Err(RunError::Setup(e.clone()));
+        }
+        _ => {}
     }
     let mut config = config;
     if let Some(m) = frames_in.source().mount() {
