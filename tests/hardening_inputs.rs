@@ -263,13 +263,17 @@ fn a_truncated_jpeg_is_an_unreadable_frame() {
     assert!(e.contains("ends early"), "{}", r[1]);
 }
 
-/// A frame of another size than the camera file's is unreadable, refused
-/// from its header.
+/// A frame of another size than the camera file's, after one of the right
+/// size, is unreadable, refused from its header. (When the first frame is
+/// of another size the calibration is wrong: exit 2, `tests/run_calibration.rs`.)
 #[test]
 fn a_frame_of_the_wrong_size_is_refused() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
     std::fs::create_dir(d.join("frames")).unwrap();
+    image::GrayImage::new(64, 48)
+        .save(d.join("frames/0.png"))
+        .unwrap();
     image::GrayImage::new(80, 60)
         .save(d.join("frames/a.png"))
         .unwrap();
@@ -283,8 +287,8 @@ fn a_frame_of_the_wrong_size_is_refused() {
     );
     assert_eq!(o.code, Some(0), "{}", o.stderr);
     let r = records(&d.join("o.jsonl"));
-    let e = r[0]["error"].as_str().unwrap_or_default();
-    assert!(e.contains("80x60") && e.contains("64x48"), "{}", r[0]);
+    let e = r[1]["error"].as_str().unwrap_or_default();
+    assert!(e.contains("80x60") && e.contains("64x48"), "{}", r[1]);
 }
 
 /// A valid 20000 x 20000 gray PNG of a few hundred KB (zeros compress).
@@ -311,6 +315,11 @@ fn image_bombs_and_a_lying_mcap_stay_under_64_mb() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
     std::fs::create_dir(d.join("bomb")).unwrap();
+    // A frame of the right size first (a first frame of another size is a
+    // wrong calibration: exit 2 before anything else is read).
+    image::GrayImage::new(1280, 960)
+        .save(d.join("bomb/0.png"))
+        .unwrap();
     png_bomb(&d.join("bomb/bomb.png"));
     assert!(std::fs::metadata(d.join("bomb/bomb.png")).unwrap().len() < 5 << 20);
     write(d, "cam.yaml", &camera_yaml(1280, 960, "0.0"));
@@ -324,7 +333,7 @@ fn image_bombs_and_a_lying_mcap_stay_under_64_mb() {
     );
     assert_eq!(o.code, Some(0), "{}", o.stderr);
     let r = records(&d.join("o.jsonl"));
-    let e = r[0]["error"].as_str().unwrap_or_default();
+    let e = r[1]["error"].as_str().unwrap_or_default();
     assert!(e.contains("20000"), "{e}");
     println!("png bomb: peak {} KiB", o.max_rss_kib);
     assert!(o.max_rss_kib < PEAK_LIMIT_KIB, "{} KiB", o.max_rss_kib);
