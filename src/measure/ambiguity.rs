@@ -29,7 +29,6 @@ use super::detect::rim;
 use super::pose::CirclePose;
 use crate::camera::CameraModel;
 use image::GrayImage;
-use nalgebra::Vector3;
 
 /// Points sampled along the predicted rim (every 5 degrees of the circle:
 /// on the reference sets 120 points, every 3 degrees, decided the same
@@ -298,18 +297,10 @@ fn predicted_rim(
     pose: &CirclePose,
     canopy_radius_m: f64,
 ) -> Option<Vec<RimPoint>> {
-    let n = pose.normal_camera;
-    if !(canopy_radius_m > 0.0 && n.iter().all(|x| x.is_finite()) && n.norm() > 0.5) {
+    if canopy_radius_m.is_nan() || canopy_radius_m <= 0.0 {
         return None;
     }
-    let n = n.normalize();
-    let helper = if n.x.abs() < 0.9 {
-        Vector3::x()
-    } else {
-        Vector3::y()
-    };
-    let e1 = n.cross(&helper).normalize();
-    let e2 = n.cross(&e1);
+    let (e1, e2) = super::pose::circle_plane_basis(&pose.normal_camera)?;
 
     let mut rim = Vec::with_capacity(SAMPLES);
     let (mut min_u, mut max_u, mut min_v, mut max_v) = (
@@ -376,6 +367,7 @@ mod tests {
     use super::*;
     use image::Luma;
     use nalgebra::Matrix3;
+    use nalgebra::Vector3;
 
     fn camera() -> CameraModel {
         lens([0.0; 5])

@@ -40,6 +40,23 @@ pub struct CirclePose {
     pub normal_camera: Vector3<f64>,
 }
 
+/// Two unit vectors spanning the plane of a circle with unit-ish normal `n`
+/// (camera frame), orthogonal to it and to each other; `None` for a
+/// non-finite or near-zero normal.
+pub fn circle_plane_basis(n: &Vector3<f64>) -> Option<(Vector3<f64>, Vector3<f64>)> {
+    if !(n.iter().all(|x| x.is_finite()) && n.norm() > 0.5) {
+        return None;
+    }
+    let n = n.normalize();
+    let helper = if n.x.abs() < 0.9 {
+        Vector3::x()
+    } else {
+        Vector3::y()
+    };
+    let e1 = n.cross(&helper).normalize();
+    Some((e1, n.cross(&e1)))
+}
+
 /// The principal axes of the elliptic cone through the ellipse.
 struct ConeAxes {
     /// Cone axis (camera frame, unit, z > 0).

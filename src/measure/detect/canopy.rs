@@ -20,9 +20,8 @@
 use super::rim;
 use crate::camera::CameraModel;
 use crate::measure::ellipse::Ellipse;
-use crate::measure::pose::{CirclePose, cone_pose};
+use crate::measure::pose::{CirclePose, circle_plane_basis, cone_pose};
 use image::GrayImage;
-use nalgebra::Vector3;
 
 /// Points along the predicted rim (every 7.5 degrees of the circle).
 const SAMPLES: usize = 48;
@@ -120,18 +119,9 @@ fn pose_ring(
     edge: RimEdge,
     profile: &mut Vec<f32>,
 ) -> (usize, usize) {
-    let n = pose.normal_camera;
-    if !(n.iter().all(|x| x.is_finite()) && n.norm() > 0.5) {
+    let Some((e1, e2)) = circle_plane_basis(&pose.normal_camera) else {
         return (0, 0);
-    }
-    let n = n.normalize();
-    let helper = if n.x.abs() < 0.9 {
-        Vector3::x()
-    } else {
-        Vector3::y()
     };
-    let e1 = n.cross(&helper).normalize();
-    let e2 = n.cross(&e1);
     // The rim's radius in pixels, for the width of the search.
     let Some(centre) = camera.project_px(&pose.centre_camera_m) else {
         return (0, 0);

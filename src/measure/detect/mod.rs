@@ -463,23 +463,7 @@ impl Detector {
                 tried.push(seed.clone());
                 // The seed's random stream is fixed by its blob's place in
                 // the size order and its kind, not by the order of trying.
-                let r = self.verify_seed(image, seed, 3 * k as u64 + seed.kind as u64);
-                tracing::debug!(
-                    centre_px = ?[seed.centre_px[0].round(), seed.centre_px[1].round()],
-                    radius_px = seed.a_px.round(),
-                    kind = seed.kind,
-                    result = ?r.as_ref().map(|v| v.score),
-                    "candidate"
-                );
-                if let Ok(v) = r
-                    && best.as_ref().is_none_or(|bv| v.score > bv.score)
-                {
-                    best = Some(v);
-                }
-                if best
-                    .as_ref()
-                    .is_some_and(|v| v.score >= self.cfg.accept_score)
-                {
+                if self.try_seed(image, seed, 3 * k as u64 + seed.kind as u64, &mut best) {
                     break 'blobs;
                 }
             }
@@ -511,23 +495,8 @@ impl Detector {
                     continue;
                 }
                 tried.push(seed.clone());
-                let r = self.verify_seed(image, &seed, 1000 + i as u64);
-                tracing::debug!(
-                    centre_px = ?[seed.centre_px[0].round(), seed.centre_px[1].round()],
-                    radius_px = seed.a_px.round(),
-                    strength = c.strength,
-                    result = ?r.as_ref().map(|v| v.score),
-                    "edge candidate"
-                );
-                if let Ok(v) = r
-                    && best.as_ref().is_none_or(|bv| v.score > bv.score)
-                {
-                    best = Some(v);
-                }
-                if best
-                    .as_ref()
-                    .is_some_and(|v| v.score >= self.cfg.accept_score)
-                {
+                tracing::debug!(strength = c.strength, "edge source circle");
+                if self.try_seed(image, &seed, 1000 + i as u64, &mut best) {
                     break;
                 }
             }
@@ -552,6 +521,32 @@ impl Detector {
                 Some(scouted)
             }
         }
+    }
+
+    /// Verifies a seed (its random stream `index`), keeps it in `best` when
+    /// it scores higher, and says whether `best` now ends the search.
+    fn try_seed(
+        &mut self,
+        image: &GrayImage,
+        seed: &Seed,
+        index: u64,
+        best: &mut Option<Verified>,
+    ) -> bool {
+        let r = self.verify_seed(image, seed, index);
+        tracing::debug!(
+            centre_px = ?[seed.centre_px[0].round(), seed.centre_px[1].round()],
+            radius_px = seed.a_px.round(),
+            kind = seed.kind,
+            result = ?r.as_ref().map(|v| v.score),
+            "candidate"
+        );
+        if let Ok(v) = r
+            && best.as_ref().is_none_or(|bv| v.score > bv.score)
+        {
+            *best = Some(v);
+        }
+        best.as_ref()
+            .is_some_and(|v| v.score >= self.cfg.accept_score)
     }
 
     /// Verifies a coarse seed: a wide ray pass from its centre, a robust
