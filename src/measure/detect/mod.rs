@@ -113,15 +113,53 @@ const MAX_WIDE_MARGIN_PX: f64 = 48.0;
 
 /// A rim step no wider than this share of the disc's minor radius (or
 /// [`SHARP_STEP_PX`]) is sharp; at least [`MIN_SHARP_SHARE`] of the rim's
-/// steps must be (linear motion blur leaves the steps across its direction
-/// sharp: a third of the rim and more).
+/// steps must be. A linear motion blur of length `L` leaves a share
+/// `(2 / pi) asin(T / L)` of a disc's rim steps narrower than `T`; at the
+/// longest blur that can be measured (the widest window, `1.2 r`) and
+/// `T = 0.2 r`, that is 10.7 %: half of it is asked for, as the rim's own
+/// softness and noise widen the steps across the blur too.
 const SHARP_STEP_RADII: f64 = 0.2;
 const SHARP_STEP_PX: f64 = 4.0;
-const MIN_SHARP_SHARE: f64 = 0.15;
+const MIN_SHARP_SHARE: f64 = 0.05;
 
 /// Edges within this many of their robust scatter (and at least
 /// `inlier_tolerance_px`) of the ellipse are on the rim.
 const NOISE_TOLERANCE_SIGMAS: f64 = 3.0;
+
+/// The narrow pass's profiles are smoothed so that their samples' noise
+/// stays near this many gray levels: the kernel's length grows with the
+/// noise's variance (see [`smoothing_half`]).
+const SMOOTHED_NOISE_GRAY: f64 = 3.0;
+/// The longest smoothing, half-width in samples: a kernel of at most
+/// +-2 px, narrower than the narrowest rim window (+-4 px).
+const MAX_SMOOTH_HALF: usize = 2;
+/// Sample spacing of the narrow pass's profiles, pixels.
+const NARROW_STEP_PX: f64 = 0.5;
+/// Wide-pass reach of seeds whose radius is not a rim's (the deepest
+/// point's inscribed circle, the point ringed by light, an edge-voting
+/// peak, whose radius comes from whatever edges voted for it), in their
+/// radii.
+const UNSURE_SEED_REACH: f64 = 5.0;
+
+/// Half-width (samples) of the narrow pass's smoothing for image noise
+/// `sigma` (gray levels): a box of `m = 2 h + 1` samples applied twice
+/// averages about `m` samples, so `m = (sigma / SMOOTHED_NOISE_GRAY)^2`.
+fn smoothing_half(sigma: f64) -> usize {
+    let m = (sigma / SMOOTHED_NOISE_GRAY).powi(2);
+    (((m - 1.0) / 2.0).max(0.0).round() as usize).min(MAX_SMOOTH_HALF)
+}
+
+/// An inner disc (see [`Detector::prefer_inner_disc`]) is within this share
+/// of `r / R` of its outer ellipse's size, its centre within this many of
+/// its radii of the outer's, and its rim step at least this share of the
+/// outer's.
+const INNER_SIZE_TOLERANCE: f64 = 0.25;
+const INNER_OFFSET_RADII: f64 = 0.3;
+const INNER_CONTRAST_SHARE: f64 = 0.5;
+/// The inner disc's rays reach this share of the outer ellipse's radius.
+const INNER_REACH_OUTER_RADII: f64 = 0.8;
+/// Random stream of an inner-disc seed, apart from its outer seed's.
+const INNER_SEED_STREAM: u64 = 0x1_0000;
 
 /// Circles of the edge source verified per frame, strongest first.
 const EDGE_SEEDS: usize = 4;
@@ -147,7 +185,9 @@ struct Seed {
     /// How far the first ray pass looks, in multiples of the seed's radius.
     reach: f64,
     /// Which point of its blob: 0 the centroid, 1 the deepest point, 2 the
-    /// point best ringed by light; 3 a circle of the edge source.
+    /// point best ringed by light; 3 a circle of the edge source; 4 the
+    /// disc looked for inside a verified ellipse (see
+    /// [`Detector::prefer_inner_disc`]).
     kind: u8,
 }
 
@@ -184,6 +224,9 @@ struct RimPass {
     /// Width of each point's step (twice its edge-to-light distance),
     /// pixels: wide along a motion blur.
     step_widths_px: Vec<f64>,
+    /// Share of the edges whose step still runs into its window's ends
+    /// after the widest window: a blur longer than can be measured.
+    clipped_share: f64,
     rim_contrast: f64,
     /// Share of the rays in the image with their edge on the ellipse.
     shape: f64,
@@ -199,6 +242,8 @@ struct Verified {
     points_px: Vec<[f64; 2]>,
     undistorted: Vec<[f64; 2]>,
     score: f64,
+    /// Median gray-level step across the rim.
+    rim_contrast: f64,
 }
 
 /// Why a candidate was not kept: shown by `RUST_LOG=debug` (the
@@ -229,6 +274,9 @@ enum Reject {
     /// Too few of the rim's steps are sharp (share that are): blurred
     /// beyond what can be measured.
     Blurred(f64),
+    /// Too few of the rim's steps are sharp (share that are): a blob out
+    /// of focus.
+    Soft(f64),
     /// The narrow passes did not settle.
     Unsettled,
 }
@@ -248,6 +296,15 @@ pub struct Detector {
     blobs: Vec<Blob>,
     voter: edges::EdgeVoter,
     profile: Vec<f32>,
+    scratch: Vec<f32>,
+    /// The narrow pass's profile before smoothing.
+    raw_profile: Vec<f32>,
+    /// Half-width (samples) of the narrow pass's profile smoothing, from
+    /// this frame's noise.
+    smooth_half: usize,
+    /// [`rim::smoothing_spread_px`] for each half-width up to
+    /// [`MAX_SMOOTH_HALF`].
+    smoothing_spread_px: Vec<f64>,
 }
 
 /// Radius of an ellipse (centred at the origin) in direction `phi`.
@@ -299,6 +356,12 @@ impl Detector {
             blobs: Vec::new(),
             voter: edges::EdgeVoter::default(),
             profile: Vec::new(),
+            scratch: Vec::new(),
+            raw_profile: Vec::new(),
+            smooth_half: 0,
+            smoothing_spread_px: (0..=MAX_SMOOTH_HALF)
+                .map(|h| rim::smoothing_spread_px(h, NARROW_STEP_PX))
+                .collect(),
         }
     }
 
@@ -309,6 +372,9 @@ impl Detector {
         if image.width() < 8 || image.height() < 8 {
             return None;
         }
+        let noise = rim::noise_sigma(image);
+        self.smooth_half = smoothing_half(noise);
+        tracing::debug!(noise, smooth_half = self.smooth_half, "frame noise");
         if let Some(h) = hint.filter(|h| h.a.is_finite() && h.b > 0.5 && h.a < 1e5) {
             match self.verify_settled(
                 image,
@@ -389,7 +455,7 @@ impl Detector {
         let mut order: Vec<usize> = (0..selected.len()).collect();
         order.sort_by_key(|&k| !round[k]);
         let mut kept: Vec<Blob> = Vec::new();
-        let mut best: Option<Verified> = None;
+        let mut verified: Vec<Verified> = Vec::new();
         let mut tried: Vec<Seed> = Vec::new();
         'blobs: for &k in &order {
             let index = selected[k];
@@ -429,7 +495,7 @@ impl Detector {
                     a_px: b.core_radius_px,
                     b_px: b.core_radius_px,
                     theta: 0.0,
-                    reach: 5.0,
+                    reach: UNSURE_SEED_REACH,
                     kind: 1,
                 });
             }
@@ -444,7 +510,7 @@ impl Detector {
                     a_px: b.ringed_radius_px,
                     b_px: b.ringed_radius_px,
                     theta: 0.0,
-                    reach: 5.0,
+                    reach: UNSURE_SEED_REACH,
                     kind: 2,
                 });
             }
@@ -463,7 +529,7 @@ impl Detector {
                 tried.push(seed.clone());
                 // The seed's random stream is fixed by its blob's place in
                 // the size order and its kind, not by the order of trying.
-                if self.try_seed(image, seed, 3 * k as u64 + seed.kind as u64, &mut best) {
+                if self.try_seed(image, seed, 3 * k as u64 + seed.kind as u64, &mut verified) {
                     break 'blobs;
                 }
             }
@@ -471,10 +537,7 @@ impl Detector {
         // The edge source, when the dark regions gave no clear drogue: a
         // disc merged with the hose, probe or a glare streak, or washed out
         // by haze, still has its rim.
-        if best
-            .as_ref()
-            .is_none_or(|v| v.score < self.cfg.accept_score)
-        {
+        if !verified.iter().any(|v| v.score >= self.cfg.accept_score) {
             let circles = self.voter.find(
                 &self.decimated,
                 self.cfg.min_contrast_gray,
@@ -488,7 +551,7 @@ impl Detector {
                     a_px: c.radius_px,
                     b_px: c.radius_px,
                     theta: 0.0,
-                    reach: 1.8,
+                    reach: UNSURE_SEED_REACH,
                     kind: 3,
                 };
                 if tried.iter().any(|t| t.same_as(&seed)) {
@@ -496,7 +559,7 @@ impl Detector {
                 }
                 tried.push(seed.clone());
                 tracing::debug!(strength = c.strength, "edge source circle");
-                if self.try_seed(image, &seed, 1000 + i as u64, &mut best) {
+                if self.try_seed(image, &seed, 1000 + i as u64, &mut verified) {
                     break;
                 }
             }
@@ -504,33 +567,40 @@ impl Detector {
         tracing::debug!(
             regions = regions,
             seeds = tried.len(),
-            best = ?best.as_ref().map(|v| v.score),
+            verified = verified.len(),
+            best = ?verified.iter().map(|v| v.score).max_by(f64::total_cmp),
             "full-frame search"
         );
         self.blobs = blobs;
-        let scouted = best?;
+        // The best candidate that passes again at the full density of rim
+        // points: a candidate that passed on the sparse rim only by the
+        // luck of where its rays fell is not the drogue.
+        verified.sort_by(|x, y| y.score.total_cmp(&x.score));
         let spacing = self.cfg.rim_point_spacing_px;
         let max_points = self.cfg.max_rim_points;
-        match self.verify_settled(image, &scouted.ellipse, spacing, max_points) {
-            Ok(full) => Some(full),
-            Err(why) => {
-                tracing::debug!(
-                    ?why,
-                    "the full-density rim pass failed: the scout's rim is kept"
-                );
-                Some(scouted)
+        verified.into_iter().find_map(|scouted| {
+            match self.verify_settled(image, &scouted.ellipse, spacing, max_points) {
+                Ok(full) => Some(full),
+                Err(why) => {
+                    tracing::debug!(
+                        centre_px = ?[scouted.ellipse.cx.round(), scouted.ellipse.cy.round()],
+                        ?why,
+                        "the full-density rim pass failed: not the drogue"
+                    );
+                    None
+                }
             }
-        }
+        })
     }
 
-    /// Verifies a seed (its random stream `index`), keeps it in `best` when
-    /// it scores higher, and says whether `best` now ends the search.
+    /// Verifies a seed (its random stream `index`), keeps it in `verified`
+    /// when it passes, and says whether it ends the search.
     fn try_seed(
         &mut self,
         image: &GrayImage,
         seed: &Seed,
         index: u64,
-        best: &mut Option<Verified>,
+        verified: &mut Vec<Verified>,
     ) -> bool {
         let r = self.verify_seed(image, seed, index);
         tracing::debug!(
@@ -540,13 +610,59 @@ impl Detector {
             result = ?r.as_ref().map(|v| v.score),
             "candidate"
         );
-        if let Ok(v) = r
-            && best.as_ref().is_none_or(|bv| v.score > bv.score)
-        {
-            *best = Some(v);
+        let r = r.map(|v| self.prefer_inner_disc(image, v, index));
+        let Ok(v) = r else {
+            return false;
+        };
+        let ends = v.score >= self.cfg.accept_score;
+        verified.push(v);
+        ends
+    }
+
+    /// The canopy's outer rim taken for the disc (under haze its step to
+    /// the sky can be the strongest on every ray) has the disc inside it,
+    /// concentric, at `r / R` of its size. When that inner ellipse verifies
+    /// as a rim of its own, with a step of comparable contrast, it is the
+    /// disc. Inside a true disc there is no such rim: the shading of its
+    /// inside gives steps far weaker than its rim's.
+    fn prefer_inner_disc(&mut self, image: &GrayImage, outer: Verified, index: u64) -> Verified {
+        let ratio = self.drogue.inner_radius_m / self.drogue.canopy_radius_m;
+        if !(ratio.is_finite() && ratio > 0.0 && ratio < 1.0) {
+            return outer;
         }
-        best.as_ref()
-            .is_some_and(|v| v.score >= self.cfg.accept_score)
+        let e = outer.ellipse;
+        // The inner rim is looked for from the centre out to well inside
+        // the outer one: there the disc's step is the strongest rise.
+        let seed = Seed {
+            centre_px: self.camera.distort_px([e.cx, e.cy]),
+            a_px: e.a * ratio,
+            b_px: e.b * ratio,
+            theta: e.theta,
+            // The wide pass reaches `reach * r + 4` px (r the seed's radius).
+            reach: ((INNER_REACH_OUTER_RADII * e.b - 4.0) / (ratio * e.b)).max(1.0),
+            kind: 4,
+        };
+        let inner = match self.verify_seed(image, &seed, index ^ INNER_SEED_STREAM) {
+            Ok(inner) => inner,
+            Err(why) => {
+                tracing::debug!(outer_axes_px = ?[e.a.round(), e.b.round()], ?why, "no inner disc");
+                return outer;
+            }
+        };
+        let size = inner.ellipse.a / e.a;
+        let offset = (inner.ellipse.cx - e.cx).hypot(inner.ellipse.cy - e.cy);
+        let nested = (size - ratio).abs() <= INNER_SIZE_TOLERANCE * ratio
+            && offset <= INNER_OFFSET_RADII * inner.ellipse.a;
+        let strong = inner.rim_contrast >= INNER_CONTRAST_SHARE * outer.rim_contrast;
+        tracing::debug!(
+            outer_axes_px = ?[e.a.round(), e.b.round()],
+            inner_axes_px = ?[inner.ellipse.a.round(), inner.ellipse.b.round()],
+            nested,
+            inner_contrast = inner.rim_contrast,
+            outer_contrast = outer.rim_contrast,
+            "inner disc"
+        );
+        if nested && strong { inner } else { outer }
     }
 
     /// Verifies a coarse seed: a wide ray pass from its centre, a robust
@@ -674,6 +790,7 @@ impl Detector {
         let mut widen = 1.0;
         let (mut points_px, mut undistorted, mut contrasts, mut mid_levels, mut widths);
         let mut rays_in_image;
+        let mut clipped_share;
         loop {
             points_px = Vec::with_capacity(rays);
             undistorted = Vec::with_capacity(rays);
@@ -708,13 +825,31 @@ impl Detector {
                 }
                 rays_in_image += 1;
                 rim::profile(image, centre, dir, s0, s1, 0.5, &mut self.profile);
-                if let Some(e) = rim::strongest_rise(&self.profile, s0, 0.5, min_contrast) {
+                // In noise, the step is located on the smoothed profile: its
+                // ends and levels are then the step's, not the noise's.
+                let half = self.smooth_half.min((0.1 * r) as usize);
+                if half > 0 {
+                    self.raw_profile.clone_from(&self.profile);
+                    rim::smooth(&mut self.profile, half, &mut self.scratch);
+                }
+                if let Some(mut e) = rim::strongest_rise(&self.profile, s0, 0.5, min_contrast) {
+                    if half > 0 {
+                        let mid = 0.5 * (e.dark + e.light);
+                        let reach = 0.5 * self.smoothing_spread_px[half] + 1.0;
+                        if let Some(s) =
+                            rim::crossing_near(&self.raw_profile, s0, 0.5, mid, e.s, reach)
+                        {
+                            e.s = s;
+                        }
+                    }
                     let p = [centre[0] + e.s * dir[0], centre[1] + e.s * dir[1]];
                     points_px.push(p);
                     undistorted.push(self.camera.undistort_px(p));
                     contrasts.push(f64::from(e.light - e.dark));
                     mid_levels.push(0.5 * (e.dark + e.light));
-                    widths.push(2.0 * (e.light_s - e.s).max(0.0));
+                    // The smoothing's own spread is not the step's.
+                    let spread = self.smoothing_spread_px[half];
+                    widths.push((2.0 * (e.light_s - e.s) - spread).max(0.0));
                     clipped += usize::from(e.clipped);
                 }
             }
@@ -726,7 +861,8 @@ impl Detector {
                 widen,
                 "rim pass"
             );
-            if widen >= MAX_WIDEN || (clipped as f64) <= CLIPPED_SHARE * points_px.len() as f64 {
+            clipped_share = clipped as f64 / points_px.len().max(1) as f64;
+            if widen >= MAX_WIDEN || clipped_share <= CLIPPED_SHARE {
                 break;
             }
             widen *= WIDEN_STEP;
@@ -793,6 +929,7 @@ impl Detector {
             residuals,
             inliers,
             step_widths_px: widths,
+            clipped_share,
             rim_contrast,
             shape,
             fill,
@@ -856,6 +993,7 @@ impl Detector {
             residuals,
             inliers,
             step_widths_px,
+            clipped_share,
             rim_contrast,
             shape,
             fill,
@@ -870,13 +1008,19 @@ impl Detector {
                 (angle, step_widths_px[i])
             })
             .collect();
+        // A blur is measured while the widest window holds its steps (the
+        // mid-level crossing of a whole blurred step is the edge); beyond
+        // that the levels are not the disc's and the canopy's.
+        if clipped_share > CLIPPED_SHARE {
+            return Err(Reject::Blurred(clipped_share));
+        }
         // Motion blur smears the rim along one direction only: across it
         // the steps stay sharp. A rim soft all round is a blob out of
-        // focus, or a blur too long to measure.
+        // focus (a cloud, a shadow), not the drogue's edge.
         let sharp_width = (SHARP_STEP_RADII * ellipse.b).max(SHARP_STEP_PX);
         let sharp = widths.iter().filter(|w| w.1 <= sharp_width).count();
         if (sharp as f64) < MIN_SHARP_SHARE * widths.len() as f64 {
-            return Err(Reject::Blurred(sharp as f64 / widths.len().max(1) as f64));
+            return Err(Reject::Soft(sharp as f64 / widths.len().max(1) as f64));
         }
         let edge = canopy::RimEdge {
             min_step_gray: (0.1 * rim_contrast).max(0.5 * self.cfg.min_contrast_gray) as f32,
@@ -930,6 +1074,7 @@ impl Detector {
             points_px: near(points_px),
             undistorted: near(undistorted),
             score,
+            rim_contrast,
         })
     }
 }

@@ -185,6 +185,112 @@ fn inside_prefix(n: usize, inside: impl Fn(usize) -> bool) -> usize {
     lo + 1
 }
 
+/// Rows apart of the rows [`noise_sigma`] looks at.
+const NOISE_ROW_STRIDE: usize = 16;
+
+/// The image noise's standard deviation, gray levels: the median absolute
+/// second difference along every [`NOISE_ROW_STRIDE`]th row, scaled to the
+/// deviation of white noise (a second difference of it has variance
+/// `6 sigma^2`; 1.4826 turns a median absolute value into a deviation).
+/// Second differences ignore the sky's gradients and vignetting; the median
+/// ignores the few edges a row crosses. Saturated pixels are left out.
+pub fn noise_sigma(img: &GrayImage) -> f64 {
+    let (w, h) = (img.width() as usize, img.height() as usize);
+    if w < 3 || h == 0 {
+        return 0.0;
+    }
+    let raw = img.as_raw();
+    // Histogram of |d2| (0..=510): the median without sorting.
+    let mut counts = [0u32; 511];
+    let mut total = 0u64;
+    for y in (NOISE_ROW_STRIDE / 2..h).step_by(NOISE_ROW_STRIDE) {
+        let row = &raw[y * w..(y + 1) * w];
+        for x in row.windows(3) {
+            if x.iter().any(|&v| v == 0 || v == 255) {
+                continue;
+            }
+            let d2 = (i32::from(x[0]) - 2 * i32::from(x[1]) + i32::from(x[2])).unsigned_abs();
+            counts[d2 as usize] += 1;
+            total += 1;
+        }
+    }
+    if total == 0 {
+        return 0.0;
+    }
+    let half = total.div_ceil(2);
+    let mut seen = 0u64;
+    let median = counts
+        .iter()
+        .position(|&c| {
+            seen += u64::from(c);
+            seen >= half
+        })
+        .unwrap_or(0);
+    1.4826 * median as f64 / 6f64.sqrt()
+}
+
+/// Smooths a profile in place with a box of `2 * half + 1` samples applied
+/// twice (a triangle-like kernel of variance `half * (half + 1) / 3`
+/// samples squared), the ends held at their values. A symmetric kernel
+/// leaves a step's mid-level crossing where it is, and keeps the noise of
+/// single samples from deciding where a wide (blurred) step's strongest rise
+/// and its ends are. `scratch` is reused between calls.
+pub fn smooth(p: &mut [f32], half: usize, scratch: &mut Vec<f32>) {
+    let n = p.len();
+    if half == 0 || n < 2 {
+        return;
+    }
+    let width = (2 * half + 1) as f32;
+    for _ in 0..2 {
+        scratch.clear();
+        scratch.extend_from_slice(p);
+        let at = |k: isize| scratch[k.clamp(0, n as isize - 1) as usize];
+        let h = half as isize;
+        let mut sum: f32 = (-h..=h).map(at).sum();
+        for (k, out) in p.iter_mut().enumerate() {
+            *out = sum / width;
+            let k = k as isize;
+            sum += at(k + h + 1) - at(k - h);
+        }
+    }
+}
+
+/// The upward crossing of `level` in profile `p` (sampled from `s_min`
+/// every `step`) nearest to `near`, within `reach` of it; `None` when there
+/// is none. A step located on a smoothed profile is placed where the raw
+/// profile crosses its mid level: smoothing makes a sharp step shallow, and
+/// a shallow step's crossing moves with any error of its levels.
+pub fn crossing_near(
+    p: &[f32],
+    s_min: f64,
+    step: f64,
+    level: f32,
+    near: f64,
+    reach: f64,
+) -> Option<f64> {
+    p.windows(2)
+        .enumerate()
+        .filter(|(_, w)| w[0] < level && w[1] >= level)
+        .map(|(j, w)| s_min + (j as f64 + f64::from((level - w[0]) / (w[1] - w[0]))) * step)
+        .filter(|s| (s - near).abs() <= reach)
+        .min_by(|x, y| (x - near).abs().total_cmp(&(y - near).abs()))
+}
+
+/// How much wider [`strongest_rise`] finds a sharp step on a profile
+/// sampled every `step` px after [`smooth`] with `half`, than without:
+/// measured on an ideal step, so that a rim's width can be told apart from
+/// the smoothing's.
+pub fn smoothing_spread_px(half: usize, step: f64) -> f64 {
+    let width = |half: usize| {
+        let mut p: Vec<f32> = (0..200)
+            .map(|k| if k < 100 { 40.0 } else { 200.0 })
+            .collect();
+        smooth(&mut p, half, &mut Vec::new());
+        strongest_rise(&p, 0.0, step, 1.0).map_or(0.0, |e| 2.0 * (e.light_s - e.s))
+    };
+    (width(half) - width(0)).max(0.0)
+}
+
 /// The strongest dark-to-light step (outward) of a profile sampled from
 /// `s_min` with spacing `step`, located sub-pixel at its mid-level crossing.
 /// `None` when no rise reaches `min_contrast` gray levels.
@@ -273,6 +379,64 @@ mod tests {
         let e = strongest_rise(&p, 0.0, step, 30.0).unwrap();
         assert!((e.s - 11.0).abs() < 1e-6, "{e:?}");
         assert!((e.dark - 20.0).abs() < 1e-3 && (e.light - 200.0).abs() < 1e-3);
+    }
+
+    #[test]
+    fn noise_sigma_of_white_noise_on_a_gradient() {
+        // Gaussian noise of known deviation on a vignetted gradient: the
+        // estimate is within 10 % (the gradient does not count).
+        use rand::{Rng, SeedableRng};
+        for sigma in [2.0, 5.0, 10.0] {
+            let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+            // Box-Muller.
+            let mut gauss = || {
+                let (u1, u2): (f64, f64) = (rng.random_range(1e-12..1.0), rng.random());
+                (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
+            };
+            let img = GrayImage::from_fn(640, 480, |x, y| {
+                let base = 60.0 + 0.15 * f64::from(x) + 0.1 * f64::from(y);
+                image::Luma([(base + sigma * gauss()).round().clamp(1.0, 254.0) as u8])
+            });
+            let est = noise_sigma(&img);
+            assert!((est / sigma - 1.0).abs() < 0.1, "sigma {sigma}: {est}");
+        }
+        assert_eq!(noise_sigma(&GrayImage::new(2, 2)), 0.0);
+    }
+
+    #[test]
+    fn smoothing_keeps_a_ramps_mid_level_crossing() {
+        let step = 0.5;
+        let p: Vec<f32> = (0..80)
+            .map(|k| {
+                let s = k as f64 * step;
+                (20.0 + 180.0 * ((s - 15.0) / 8.0).clamp(0.0, 1.0)) as f32
+            })
+            .collect();
+        let mut q = p.clone();
+        smooth(&mut q, 3, &mut Vec::new());
+        let e = strongest_rise(&q, 0.0, step, 30.0).unwrap();
+        assert!((e.s - 19.0).abs() < 1e-3, "{e:?}");
+    }
+
+    #[test]
+    fn smoothing_spread_grows_with_the_kernel() {
+        assert_eq!(smoothing_spread_px(0, 0.5), 0.0);
+        let spreads: Vec<f64> = (1..=4).map(|h| smoothing_spread_px(h, 0.5)).collect();
+        // The kernel's half-support is h px; the step's ends lie within it.
+        for (h, w) in (1..=4).zip(&spreads) {
+            assert!(*w > 0.5 * h as f64 && *w < 4.0 * h as f64, "h {h}: {w}");
+        }
+        assert!(spreads.windows(2).all(|p| p[1] > p[0]), "{spreads:?}");
+    }
+
+    #[test]
+    fn crossing_near_picks_the_nearest_upward_crossing() {
+        // Up at 2.5 and 7.5 (samples 1 apart), down at 5.5.
+        let p = [0.0f32, 0.0, 0.0, 10.0, 10.0, 10.0, 0.0, 0.0, 10.0, 10.0];
+        assert_eq!(crossing_near(&p, 0.0, 1.0, 5.0, 3.0, 2.0), Some(2.5));
+        assert_eq!(crossing_near(&p, 0.0, 1.0, 5.0, 6.5, 2.0), Some(7.5));
+        assert_eq!(crossing_near(&p, 10.0, 0.5, 5.0, 11.0, 1.0), Some(11.25));
+        assert_eq!(crossing_near(&p, 0.0, 1.0, 5.0, 5.0, 1.0), None);
     }
 
     #[test]
