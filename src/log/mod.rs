@@ -179,6 +179,26 @@ impl LogError {
     }
 }
 
+/// Checks that `path` is a file starting with the MCAP magic, before a
+/// command creates anything: a missing, unreadable or foreign input is
+/// [`LogError::Format`] (exit status 2), and nothing is left behind.
+pub fn check_mcap_input(path: &Path) -> Result<(), LogError> {
+    use std::io::Read;
+    let not_readable = |why: String| Err(LogError::format(path, why));
+    if path.is_dir() {
+        return not_readable("a folder, not a file".into());
+    }
+    let mut file = match std::fs::File::open(path) {
+        Ok(f) => f,
+        Err(e) => return not_readable(format!("cannot open it: {e}")),
+    };
+    let mut magic = [0u8; 8];
+    if file.read_exact(&mut magic).is_err() || magic.as_slice() != mcap::MAGIC {
+        return not_readable("no MCAP magic at the start".into());
+    }
+    Ok(())
+}
+
 /// An error with its causes ("I/O error: No space left on device"): the
 /// `mcap` crate's errors hide the io::Error in `source()`.
 pub(crate) fn error_chain(e: &dyn std::error::Error) -> String {

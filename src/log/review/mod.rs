@@ -202,6 +202,8 @@ truth_range_m,position_error_m,normal_error_deg";
 /// folder. An existing `out_dir` is replaced only when it is empty or an
 /// earlier review (it holds `poses.csv`).
 pub fn review(log: &Path, out_dir: &Path) -> Result<ReviewReport, LogError> {
+    // Before any folder is made: a bad input leaves nothing behind.
+    super::check_mcap_input(log)?;
     if out_dir.exists() {
         let earlier_review = out_dir.join("poses.csv").is_file();
         let empty = std::fs::read_dir(out_dir)
