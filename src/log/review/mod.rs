@@ -270,6 +270,12 @@ fn review_into(log: &Path, out_dir: &Path) -> Result<ReviewReport, LogError> {
         by_range: stats::range_bins(),
         ..Default::default()
     };
+    // `run --fast` stamps its messages on the source's clock, which stands
+    // still while a frame is processed: capture → send is no latency there.
+    let source_clock = r.metadata.iter().any(|(name, values)| {
+        name == super::metadata::RUN_METADATA
+            && values.get("clock").map(String::as_str) == Some("source")
+    });
     let mut last_frame_seq: Option<u32> = None;
     let mut last_heartbeat: Option<u64> = None;
     let mut last_sent_capture: Option<u64> = None;
@@ -403,6 +409,7 @@ fn review_into(log: &Path, out_dir: &Path) -> Result<ReviewReport, LogError> {
                 let incoming = m.channel.topic == topics::MAVLINK_IN;
                 // Capture → send latency: the first pose message sent for a frame.
                 if !incoming
+                    && !source_clock
                     && let (Some(sent), Some(captured)) = (l.time_ns, l.capture_time_ns)
                     && last_sent_capture != Some(captured)
                 {
