@@ -645,3 +645,112 @@ impl Connection {
         Ok(())
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::config::Config;
+    use crate::link::messages::tests::detection;
+    use crate::link::telemetry::CONVERGED_REPLIES;
+    use crate::measure::StageTimes;
+    use mavlink::dialects::development as dev;
+    use nalgebra::Vector3;
+
+    const CAPTURE_NS: u64 = 1_700_000_000_123_456_789;
+    /// The autopilot's clock (µs since its boot, as ns) minus ours.
+    const AUTOPILOT_MINUS_OURS_NS: i64 = -1_699_999_000_000_000_000;
+
+    fn context(cfg: &super::super::LinkConfig) -> Context {
+        Context {
+            settings: Arc::new(super::super::validate(cfg, None).unwrap()),
+            counters: Arc::default(),
+            telemetry: Arc::new(Mutex::new(Telemetry::new(50_000_000))),
+            events: super::super::events::event_queue(8, 10.0).0,
+            stopped: Arc::default(),
+            clock: RunClock::wall(),
+            handoff: Arc::default(),
+        }
+    }
+
+    /// Our TIMESYNC requests answered by the autopilot (1 ms each way).
+    fn converge(ctx: &Context) {
+        let mut tm = lock(&ctx.telemetry);
+        for k in 0..CONVERGED_REPLIES as i64 {
+            let ts1 = 1_700_000_000_000_000_000 + k * 1_000_000_000;
+            tm.timesync.request_sent(ts1);
+            assert!(tm.timesync.reply(
+                ts1 + 1_000_000 + AUTOPILOT_MINUS_OURS_NS,
+                ts1,
+                ts1 + 2_000_000
+            ));
+        }
+    }
+
+    fn target_relative_timestamp_us(ctx: &Context) -> u64 {
+        let m = Measurement {
+            seq: 1,
+            capture_time_ns: CAPTURE_NS,
+            detection: Some(detection(
+                Vector3::new(6.0, 0.5, -0.3),
+                Vector3::new(-1.0, 0.0, 0.0),
+            )),
+            tracked: false,
+            times: StageTimes::default(),
+        };
+        let mut out = Vec::new();
+        build_pose_messages(ctx, &m, &mut out);
+        match out.as_slice() {
+            [Outbound::Development(dev::MavMessage::TARGET_RELATIVE(t))] => t.timestamp,
+            other => panic!("not one TARGET_RELATIVE: {}", other.len()),
+        }
+    }
+
+    /// PX4's receiver maps a companion's stamp with its own timesync
+    /// (`Timesync::sync_stamp`: the stamp plus the offset PX4 measured
+    /// against our TIMESYNC replies once converged, else its arrival time),
+    /// and the message defines `timestamp` as Unix time (README, "PX4:
+    /// TARGET_RELATIVE"). So by default it is the capture time on our Unix
+    /// clock, also once our own TIMESYNC has converged; "autopilot" moves it
+    /// onto the autopilot's clock only then.
+    #[test]
+    fn target_relative_timestamp_is_our_clock_by_default_even_once_converged() {
+        let mut cfg = Config::embedded().link;
+        assert_eq!(cfg.target_relative_clock, TimeClock::Own);
+        cfg.messages = vec![PoseMessage::TargetRelative];
+        let ours_us = CAPTURE_NS / 1000;
+        let own = context(&cfg);
+        assert_eq!(target_relative_timestamp_us(&own), ours_us);
+        converge(&own);
+        assert_eq!(target_relative_timestamp_us(&own), ours_us);
+
+        cfg.target_relative_clock = TimeClock::Autopilot;
+        let autopilot = context(&cfg);
+        // Not converged: our clock, PX4 maps it as for "own".
+        assert_eq!(target_relative_timestamp_us(&autopilot), ours_us);
+        converge(&autopilot);
+        let want_us = (CAPTURE_NS as i64 + AUTOPILOT_MINUS_OURS_NS) as u64 / 1000;
+        assert_eq!(target_relative_timestamp_us(&autopilot), want_us);
+        assert_eq!(
+            want_us, 1_000_123_456,
+            "the autopilot's clock: 1000.1 s since boot"
+        );
+    }
+
+    #[test]
+    fn the_rate_limit_passes_a_source_at_its_rate_and_thins_a_faster_one() {
+        // 30 fps capture times against a 30 Hz limit: all pass (a hair of
+        // rounding is not a missing token); 60 fps against 30 Hz: half.
+        for (fps, limit_hz, want) in [(30.0, 30.0, 300), (30.0, 50.0, 300), (60.0, 30.0, 151)] {
+            let mut limit = RateLimit::new(limit_hz);
+            let mut sent = 0;
+            for k in 0..300u64 {
+                let now_s = k as f64 / fps;
+                if limit.wait_s(now_s).is_none() {
+                    limit.spend(now_s);
+                    sent += 1;
+                }
+            }
+            assert_eq!(sent, want, "{fps} fps at {limit_hz} Hz");
+        }
+    }
+}
