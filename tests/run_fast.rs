@@ -170,6 +170,22 @@ fn fast_simulation_and_fast_replay_send_every_pose_and_log_the_real_length() {
             "{topic} from {a} to {b}, frames from {first_frame} to {last_frame}"
         );
     }
+    // What `review` makes of it: the run's length, and no latency (the
+    // source's clock stands still while a frame is processed).
+    let review = std::process::Command::new(BIN)
+        .arg("review")
+        .arg(&run.log_path)
+        .arg("--out")
+        .arg(tmp.path().join("review"))
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&review.stdout);
+    assert!(review.status.success(), "{text}");
+    assert!(
+        text.contains(&format!("duration   {duration_s:.1} s")),
+        "{text}"
+    );
+    assert!(text.contains("latency    not measured"), "{text}");
     eprintln!(
         "run --fast sim:approach: {} poses received for {} detected frames of {frames}; \
          log span {span_s:.3} s for a {duration_s} s scenario",

@@ -144,6 +144,8 @@ pub struct ReviewReport {
     pub processing_ms: Histogram,
     /// Capture to pose sent, ms (when the log has it).
     pub latency_ms: Histogram,
+    /// The log is on the source's clock (`run --fast`): no latency in it.
+    pub source_clock: bool,
     pub mavlink_out: BTreeMap<String, u64>,
     pub mavlink_in: BTreeMap<String, u64>,
     pub heartbeats_in: u64,
@@ -276,6 +278,7 @@ fn review_into(log: &Path, out_dir: &Path) -> Result<ReviewReport, LogError> {
         name == super::metadata::RUN_METADATA
             && values.get("clock").map(String::as_str) == Some("source")
     });
+    r.source_clock = source_clock;
     let mut last_frame_seq: Option<u32> = None;
     let mut last_heartbeat: Option<u64> = None;
     let mut last_sent_capture: Option<u64> = None;
@@ -578,7 +581,14 @@ impl fmt::Display for ReviewReport {
             100.0 * self.detection_rate()
         )?;
         writeln!(f, "processing {}", percentiles(&self.processing_ms))?;
-        writeln!(f, "latency    {}", percentiles(&self.latency_ms))?;
+        if self.source_clock {
+            writeln!(
+                f,
+                "latency    not measured (run --fast: the log is on the source's clock)"
+            )?;
+        } else {
+            writeln!(f, "latency    {}", percentiles(&self.latency_ms))?;
+        }
         let sent: u64 = self.mavlink_out.values().sum();
         let sent_list: Vec<String> = self
             .mavlink_out
