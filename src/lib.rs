@@ -5,6 +5,7 @@
 //! `log` writes everything to MCAP.
 
 pub mod camera;
+pub mod clock;
 pub mod commands;
 pub mod config;
 pub mod frame;

@@ -13,7 +13,7 @@ the readable records of a chunk whose CRC fails, reported as DAMAGED and recorde
 the copy's metadata) into a new zstd-compressed file with its summary and index. The \
 input is never changed; the output appears only when complete. Exit status: 0 \
 recovered; 1 the output could not be written, or it would hold fewer messages than the \
-input yields (refused, nothing written); 2 the input is not an MCAP log."
+input yields (refused, nothing written); 2 the input is missing or not an MCAP log."
 )]
 pub struct RecoverArgs {
     /// The cut-short MCAP log.

@@ -1,10 +1,22 @@
 //! `drogue-vision run`: the live pipeline. Source → measurement thread → link
 //! (latest-wins) and log (every frame), with bounded queues so that nothing
 //! waits on the log and the link always gets the newest measurement.
+//!
+//! `--fast` (a simulation, a log or a folder as fast as the pipeline goes)
+//! runs on the source's clock ([`crate::clock`]): the link measures a pose's
+//! age and the log stamps every topic against the capture time of the newest
+//! measured frame, and the measurement waits until the link is done with
+//! each frame ([`LinkHandle::wait_handled`]) instead of handing over
+//! latest-wins. So every detected frame's pose is sent (unless `max_rate_hz`,
+//! kept on the source's clock, thins it), and the log spans the source's
+//! first to last capture time. The log waits for room there instead of
+//! dropping (nothing is live). Capture → send latency is not measured there
+//! (the source's clock stands still while a frame is processed).
 
 use super::run_stats::{PipelineMeters, ResourceSummary, StatsThread};
 use super::run_status::{StatusReporter, Vitals};
 use crate::camera::CameraModel;
+use crate::clock::RunClock;
 use crate::config::{Config, SitlAnchor, VehiclePoseSource};
 use crate::frame::Frame;
 use crate::link::{Link, LinkHandle, VehiclePose};
@@ -53,7 +65,9 @@ pub struct RunArgs {
     /// Stop after this many frames.
     #[arg(long)]
     pub max_frames: Option<u64>,
-    /// Run as fast as the pipeline goes instead of at the source's frame rate.
+    /// Run as fast as the pipeline goes instead of at the source's frame
+    /// rate, on the source's clock: every detected frame's pose is still sent
+    /// and the log spans the source's own time.
     #[arg(long)]
     pub fast: bool,
     /// Who flies a sim: source's receiver: `script` (the scenario) or
@@ -95,9 +109,18 @@ pub struct RunSummary {
     pub interrupted: bool,
     /// CPU, memory and queues (the `/drogue/stats` figures).
     pub resources: ResourceSummary,
-    /// Capture to first pose message sent, ms.
+    /// Capture to first pose message sent, ms (empty with `--fast`).
     pub latency_ms: Histogram,
+    /// `--fast`: the run was on the source's clock.
+    pub source_clock: bool,
+    /// `--fast`: frames the link was not done with within
+    /// [`HANDOFF_TIMEOUT`] (their poses may not have been sent).
+    pub link_handoff_timeouts: u64,
 }
+
+/// `--fast`: longest the measurement waits for the link to be done with a
+/// frame (a transport write stuck that long is a fault the link reports).
+const HANDOFF_TIMEOUT: Duration = Duration::from_secs(2);
 
 /// Where the run's frames come from: any source, or the simulator flown by
 /// the autopilot (SITL closed loop).
@@ -463,7 +486,7 @@ fn realtime_if_asked(thread: &str, priority: u8) {
 fn spawn_measurement(
     mut measurer: Measurer,
     mount: Mount,
-    link: LinkHandle,
+    (link, clock): (LinkHandle, RunClock),
     log: LogHandle,
     counts: (Arc<Mutex<RunSummary>>, Arc<PipelineMeters>, Arc<Vitals>),
     handed_to_link: Option<std::sync::mpsc::Sender<u64>>,
@@ -475,23 +498,45 @@ fn spawn_measurement(
     let (tx, rx) = sync_channel::<Arc<Frame>>(1);
     let handle = std::thread::spawn(move || {
         realtime_if_asked("measurement", realtime_priority);
+        let source_clock = clock.is_source();
+        let mut handoff_timeouts = 0u64;
         for frame in rx {
             let m = Arc::new(measurer.measure(&frame));
             let measured_ns = unix_now_ns();
+            // --fast: the source's clock reaches this frame as it goes to the
+            // link, which is then waited for (module docs).
+            clock.advance_to(frame.capture_time_ns);
             link.submit(Arc::clone(&m));
+            let timed_out =
+                source_clock && !link.wait_handled(frame.capture_time_ns, HANDOFF_TIMEOUT);
+            if timed_out {
+                handoff_timeouts += 1;
+                if handoff_timeouts.is_power_of_two() {
+                    tracing::warn!(
+                        seq = frame.seq,
+                        timeouts = handoff_timeouts,
+                        "--fast: the link was not done with a frame within {HANDOFF_TIMEOUT:?}"
+                    );
+                }
+            }
             if let Some(done) = &handed_to_link {
                 let _ = done.send(frame.seq);
             }
             let mut record =
                 serde_json::to_value(DetectionRecord::from_measurement(frame.seq.to_string(), &m))
                     .unwrap_or_default();
-            record["latency_ns"] = serde_json::json!({
-                "captured": frame.capture_time_ns,
-                "measured": measured_ns,
-            });
+            // Latency stamps are wall-clock times from the capture on: not
+            // on the source's clock.
+            if !source_clock {
+                record["latency_ns"] = serde_json::json!({
+                    "captured": frame.capture_time_ns,
+                    "measured": measured_ns,
+                });
+            }
             if let Ok(mut c) = counts.lock() {
                 c.measured += 1;
                 c.detected += u64::from(m.detection.is_some());
+                c.link_handoff_timeouts += u64::from(timed_out);
             }
             vitals.measured.fetch_add(1, Ordering::Relaxed);
             if let Some(d) = &m.detection {
@@ -561,6 +606,20 @@ pub fn run(
         }
         _ => {}
     }
+    // --fast runs on the source's clock (module docs); a camera's frames come
+    // in real time whatever --fast says.
+    let live = frames_in.source().live();
+    if args.fast && live {
+        tracing::warn!("--fast has no effect on a live camera: the run is on the wall clock");
+    }
+    let clock = if args.fast && !live {
+        RunClock::source(match &first_item {
+            Some(Ok(first)) => first.capture_time_ns,
+            _ => 0,
+        })
+    } else {
+        RunClock::wall()
+    };
     let mut config = config;
     if let Some(m) = frames_in.source().mount() {
         config.mount = m;
@@ -576,14 +635,22 @@ pub fn run(
         .enable_all()
         .build()
         .map_err(|e| RunError::Setup(format!("tokio runtime: {e}")))?;
-    let link = Link::start(&config.link, args.mavlink.as_deref(), rt.handle())
-        .map_err(|e| RunError::Setup(e.to_string()))?;
+    let link = Link::start_with_clock(
+        &config.link,
+        args.mavlink.as_deref(),
+        rt.handle(),
+        clock.clone(),
+    )
+    .map_err(|e| RunError::Setup(e.to_string()))?;
     let log_dir = args
         .log_dir
         .clone()
         .unwrap_or_else(|| config.log.dir.clone());
     let log = FlightLog::start(&config.log, &log_dir, &camera)
         .map_err(|e| RunError::Setup(e.to_string()))?;
+    log.set_clock(clock.clone());
+    // --fast: nothing is live, so the log waits for room rather than drop.
+    log.set_waiting(clock.is_source());
     log_layer_sink(&log);
     log.metadata(
         crate::log::metadata::RUN_METADATA,
@@ -597,6 +664,7 @@ pub fn run(
                     .mavlink
                     .clone()
                     .unwrap_or_else(|| config.link.connection.clone()),
+                clock: if clock.is_source() { "source" } else { "wall" }.into(),
             },
         ),
     );
@@ -623,13 +691,17 @@ pub fn run(
     let busy_depth = (config.log.queue_len as u64).div_ceil(2);
     let events_done = Arc::new(AtomicBool::new(false));
     let events_done_flag = Arc::clone(&events_done);
+    // (On the source's clock a send's time is its frame's capture time: no
+    // latency to measure.)
+    let measure_latency = !clock.is_source();
     let event_thread = std::thread::spawn(move || {
         let mut latency_ms = Histogram::default();
         let mut last_sent_capture = None;
         loop {
             match events.recv_timeout(Duration::from_millis(100)) {
                 Some(ev) => {
-                    if let (true, Some(captured)) = (ev.outgoing, ev.capture_time_ns)
+                    if let (true, true, Some(captured)) =
+                        (measure_latency, ev.outgoing, ev.capture_time_ns)
                         && last_sent_capture != Some(captured)
                     {
                         last_sent_capture = Some(captured);
@@ -659,11 +731,10 @@ pub fn run(
     // measurement right when latency matters, which a camera never does.
     let (handed_tx, handed_rx) = std::sync::mpsc::channel::<u64>();
     let yield_to_measurement = frames_in.source().renders_frames();
-    let live = frames_in.source().live();
     let (frame_tx, measure_thread) = spawn_measurement(
         measurer,
         mount,
-        link.clone(),
+        (link.clone(), clock.clone()),
         log.clone(),
         (
             Arc::clone(&counts),
@@ -728,6 +799,8 @@ pub fn run(
                 continue;
             }
         };
+        // (Only when the source's first item was unreadable.)
+        clock.start_at(frame.capture_time_ns);
         if paced && matches!(frames_in, Frames::Source(_)) {
             frame.capture_time_ns = pacer.wait_until_due(frame.capture_time_ns, frame.seq);
         }
@@ -792,6 +865,7 @@ pub fn run(
     summary.link = Some(link_stats);
     summary.resources = resources;
     summary.latency_ms = latency_ms;
+    summary.source_clock = clock.is_source();
     summary.log_dropped = log_summary.dropped_queue_full + log_summary.dropped_write_error;
     if skipped > 0 {
         tracing::warn!("{skipped} frames were not measured (measurement busy)");
@@ -823,8 +897,16 @@ fn link_report(l: &crate::link::LinkStats) -> String {
     } else {
         "autopilot heartbeat never heard".to_string()
     };
+    let rate_limited = if l.rate_limited > 0 {
+        format!(
+            " ({} over max_rate_hz on the source's clock)",
+            l.rate_limited
+        )
+    } else {
+        String::new()
+    };
     format!(
-        "\nlink: sent {sent}; {} stale poses not sent; {heartbeat}, {} reconnects",
+        "\nlink: sent {sent}{rate_limited}; {} stale poses not sent; {heartbeat}, {} reconnects",
         l.stale, l.reconnects
     )
 }
@@ -843,7 +925,7 @@ impl RunSummary {
             .map(|p| p.display().to_string())
             .collect();
         let link_line = self.link.as_ref().map_or_else(String::new, link_report);
-        let held = if self.vehicle_pose_held > 0 {
+        let mut held = if self.vehicle_pose_held > 0 {
             format!(
                 ", {} rendered with a held autopilot pose (stale)",
                 self.vehicle_pose_held
@@ -851,7 +933,15 @@ impl RunSummary {
         } else {
             String::new()
         };
-        let latency = if self.latency_ms.count() == 0 {
+        if self.link_handoff_timeouts > 0 {
+            held.push_str(&format!(
+                ", {} not handled by the link in time (--fast)",
+                self.link_handoff_timeouts
+            ));
+        }
+        let latency = if self.source_clock {
+            "not measured with --fast (the run is on the source's clock)".to_string()
+        } else if self.latency_ms.count() == 0 {
             "no pose sent".to_string()
         } else {
             format!(

@@ -8,7 +8,6 @@
 
 use crate::link::EventReceiver;
 use crate::log::LogHandle;
-use crate::source::dir::unix_now_ns;
 use cpu_time::{ProcessTime, ThreadTime};
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Condvar, Mutex};
@@ -135,7 +134,8 @@ impl Sampler {
         let log_queue = self.log.queue_depth();
         let m = &self.meters;
         let record = serde_json::json!({
-            "time_ns": unix_now_ns(),
+            // On the log's clock (the source's with --fast), like every topic.
+            "time_ns": self.log.now_ns(),
             "interval_s": wall.as_secs_f64(),
             "cpu_pct": {
                 "process": pct(process, wall),

@@ -19,7 +19,8 @@ use std::time::Duration;
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct LinkEvent {
     /// When the write to the transport started / the read returned, ns since
-    /// the Unix epoch.
+    /// the Unix epoch, on the run's clock (`run --fast`: the source's, see
+    /// [`crate::clock`]).
     pub time_ns: u64,
     /// Sent by us (`/mavlink/out`) or received (`/mavlink/in`).
     pub outgoing: bool,

@@ -475,7 +475,7 @@ pub fn fields_json(msg: &MavMessage) -> Value {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::measure::ellipse::Ellipse;
     use crate::measure::{CirclePose, Disambiguation, FitQuality, StageTimes};

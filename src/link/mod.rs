@@ -14,10 +14,22 @@
 //!
 //! Nothing on the link can stop the process: every fault is logged, counted
 //! ([`LinkStats`]) and retried.
+//!
+//! The link's "now" (a pose's age for `max_age_ms`, the time stamped on each
+//! sent or received message for the log) is the run's [`RunClock`]: the
+//! wall clock, or with `run --fast` the source's clock, the capture time of
+//! the newest measurement handed to the link, so that a replay as fast as
+//! possible still sends its poses. There `max_rate_hz` is kept on the
+//! source's clock too (a measurement over the budget is not sent, counted
+//! as `rate_limited`), and [`LinkHandle::wait_handled`] lets the measurement
+//! wait until the link is done with each one ([`handoff`]) instead of
+//! handing over latest-wins. The protocol's own times (TIMESYNC, the
+//! autopilot's telemetry) stay on the wall clock.
 
 pub mod address;
 pub mod events;
 pub mod frame;
+mod handoff;
 pub mod messages;
 mod session;
 pub mod signing;
@@ -29,6 +41,7 @@ pub use events::{EventReceiver, LinkEvent};
 pub use stats::LinkStats;
 pub use telemetry::VehiclePose;
 
+use crate::clock::RunClock;
 use crate::measure::Measurement;
 use address::Address;
 use serde::{Deserialize, Serialize};
@@ -143,6 +156,7 @@ struct Shared {
     counters: Arc<stats::Counters>,
     telemetry: Arc<Mutex<telemetry::Telemetry>>,
     events: EventReceiver,
+    handoff: Arc<handoff::Handoff>,
 }
 
 impl Drop for Shared {
@@ -239,6 +253,17 @@ impl Link {
         connection: Option<&str>,
         rt: &tokio::runtime::Handle,
     ) -> Result<LinkHandle, LinkError> {
+        Self::start_with_clock(cfg, connection, rt, RunClock::wall())
+    }
+
+    /// [`Link::start`] on the run's clock (the source's for `run --fast`,
+    /// see the module docs).
+    pub fn start_with_clock(
+        cfg: &LinkConfig,
+        connection: Option<&str>,
+        rt: &tokio::runtime::Handle,
+        clock: RunClock,
+    ) -> Result<LinkHandle, LinkError> {
         let settings = Arc::new(validate(cfg, connection)?);
         let (latest, latest_rx) = watch::channel(None);
         let (shutdown_tx, shutdown_rx) = watch::channel(false);
@@ -251,12 +276,15 @@ impl Link {
         // A few pose messages at most wait here: the connection task drains
         // it at once, and drops what is stale when it was away.
         let (out_tx, out_rx) = mpsc::channel(16);
+        let handoff = Arc::new(handoff::Handoff::default());
         let ctx = session::Context {
             settings,
             counters: counters.clone(),
             telemetry: telemetry.clone(),
             events: events_tx,
             stopped: stopped.clone(),
+            clock,
+            handoff: handoff.clone(),
         };
         rt.spawn(session::pose_task(
             ctx.clone(),
@@ -274,6 +302,7 @@ impl Link {
                 counters,
                 telemetry,
                 events: events_rx,
+                handoff,
             }),
         })
     }
@@ -287,6 +316,21 @@ impl LinkHandle {
         }
         stats::bump(&self.shared.counters.submitted, 1);
         self.shared.latest.send_replace(Some(m));
+    }
+
+    /// `run --fast`: waits (at most `timeout`) until the link is done with
+    /// the measurement captured at `capture_time_ns` that was just
+    /// submitted: its messages written, or dropped and counted. Returns early
+    /// while the transport is down (nothing would be written) or after a
+    /// shutdown; `false` when the link did not get that far in time.
+    pub fn wait_handled(&self, capture_time_ns: u64, timeout: std::time::Duration) -> bool {
+        let counters = &self.shared.counters;
+        self.shared.handoff.wait(
+            capture_time_ns,
+            timeout,
+            || counters.connected.load(Ordering::Relaxed),
+            || self.shared.stopped.load(Ordering::SeqCst),
+        )
     }
 
     /// Every message sent or received, decoded, for the MCAP `/mavlink/out`

@@ -3,17 +3,19 @@
 
 use super::events::{EventSender, LinkEvent};
 use super::frame::{DecodeCounts, FrameDecoder, FrameEncoder, Incoming};
+use super::handoff::Handoff;
 use super::messages::{self, DroguePose, Outbound, TargetRelativeInputs};
 use super::stats::{Counters, bump};
 use super::telemetry::Telemetry;
 use super::transport::Transport;
 use super::{PoseMessage, Settings, TimeClock};
+use crate::clock::RunClock;
 use crate::measure::Measurement;
 use mavlink::dialects::ardupilotmega::{HEARTBEAT_DATA, MavAutopilot, MavMessage, MavType};
 use mavlink::{Message, SigningConfig, SigningData};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
-use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
+use std::time::{Duration, Instant};
 use tokio::sync::{mpsc, watch};
 use tokio::time::{MissedTickBehavior, interval, sleep_until, timeout};
 
@@ -29,19 +31,25 @@ pub(crate) struct Context {
     pub telemetry: Arc<Mutex<Telemetry>>,
     pub events: EventSender,
     pub stopped: Arc<AtomicBool>,
+    /// The run's clock: staleness and the events' times (module docs of
+    /// [`super`]).
+    pub clock: RunClock,
+    pub handoff: Arc<Handoff>,
 }
 
 /// A pose message on its way to the connection task.
 pub(crate) struct Outgoing {
     pub message: Outbound,
     pub capture_time_ns: u64,
+    /// The last message of its measurement: once it is written or dropped,
+    /// the link is done with that measurement ([`Handoff`]).
+    pub last: bool,
 }
 
-/// Our clock: ns since the Unix epoch (the capture times' clock).
+/// The wall clock, ns since the Unix epoch: TIMESYNC's and the telemetry's
+/// clock (the protocol's times are always real).
 pub(crate) fn unix_now_ns() -> u64 {
-    SystemTime::now()
-        .duration_since(UNIX_EPOCH)
-        .map_or(0, |d| u64::try_from(d.as_nanos()).unwrap_or(u64::MAX))
+    crate::clock::unix_now_ns()
 }
 
 fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
@@ -49,10 +57,21 @@ fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
 }
 
 impl Context {
-    /// Older than `max_age_ms` at `now_ns`?
-    fn is_stale(&self, capture_time_ns: u64, now_ns: u64) -> bool {
+    /// Older than `max_age_ms` now, on the run's clock?
+    fn is_stale(&self, capture_time_ns: u64) -> bool {
         let max_age_ms = self.settings.cfg.max_age_ms;
-        max_age_ms > 0 && now_ns.saturating_sub(capture_time_ns) > max_age_ms * 1_000_000
+        max_age_ms > 0
+            && self.clock.now_ns().saturating_sub(capture_time_ns) > max_age_ms * 1_000_000
+    }
+
+    /// The time of a message sent or received at `wall_ns`, on the run's
+    /// clock (the log's).
+    fn event_time_ns(&self, wall_ns: u64) -> u64 {
+        if self.clock.is_source() {
+            self.clock.now_ns()
+        } else {
+            wall_ns
+        }
     }
 }
 
@@ -128,16 +147,25 @@ pub(crate) async fn pose_task(
     mut shutdown: watch::Receiver<bool>,
 ) {
     let mut limit = RateLimit::new(ctx.settings.cfg.max_rate_hz);
+    let on_source_clock = ctx.clock.is_source();
+    // The rate limit's time, s: since the start (wall clock), or the
+    // capture times since the first (the source's clock).
+    let wall_start = tokio::time::Instant::now();
+    let mut source_start_ns = None;
     let mut built = Vec::with_capacity(4);
     loop {
         tokio::select! {
             changed = latest.changed() => if changed.is_err() { return },
             _ = shutdown.changed() => return,
         }
-        if let Some(at) = limit.wait_until(tokio::time::Instant::now()) {
-            tokio::select! {
-                _ = sleep_until(at) => {}
-                _ = shutdown.changed() => return,
+        // Live: wait for the budget, then take the newest measurement.
+        if !on_source_clock {
+            let now = tokio::time::Instant::now();
+            if let Some(wait) = limit.wait_s(now.duration_since(wall_start).as_secs_f64()) {
+                tokio::select! {
+                    _ = sleep_until(now + wait) => {}
+                    _ = shutdown.changed() => return,
+                }
             }
         }
         if ctx.stopped.load(Ordering::SeqCst) {
@@ -146,26 +174,51 @@ pub(crate) async fn pose_task(
         let Some(m) = latest.borrow_and_update().clone() else {
             continue;
         };
+        let capture = m.capture_time_ns;
+        ctx.handoff.taken(capture);
         bump(&ctx.counters.considered, 1);
-        if m.detection.is_some() && ctx.is_stale(m.capture_time_ns, unix_now_ns()) {
+        if m.detection.is_some() && ctx.is_stale(capture) {
             bump(&ctx.counters.stale, 1);
+            ctx.handoff.done(capture);
             continue;
         }
         built.clear();
         build_pose_messages(&ctx, &m, &mut built);
         if built.is_empty() {
+            ctx.handoff.done(capture);
             continue;
         }
-        for message in built.drain(..) {
+        let now_s = if on_source_clock {
+            let start = *source_start_ns.get_or_insert(capture);
+            capture.saturating_sub(start) as f64 * 1e-9
+        } else {
+            tokio::time::Instant::now()
+                .duration_since(wall_start)
+                .as_secs_f64()
+        };
+        // The source's clock cannot be waited for: over the budget on it,
+        // the measurement is not sent (a live run waits instead, above).
+        if on_source_clock && limit.wait_s(now_s).is_some() {
+            bump(&ctx.counters.rate_limited, 1);
+            ctx.handoff.done(capture);
+            continue;
+        }
+        let count = built.len();
+        for (i, message) in built.drain(..).enumerate() {
+            let last = i + 1 == count;
             let o = Outgoing {
                 message,
-                capture_time_ns: m.capture_time_ns,
+                capture_time_ns: capture,
+                last,
             };
             if out.try_send(o).is_err() {
                 bump(&ctx.counters.dropped_outgoing, 1);
+                if last {
+                    ctx.handoff.done(capture);
+                }
             }
         }
-        limit.spend(tokio::time::Instant::now());
+        limit.spend(now_s);
     }
 }
 
@@ -173,10 +226,12 @@ pub(crate) async fn pose_task(
 /// burst of [`RateLimit::BURST`], so that a camera running at the limit rate
 /// with some jitter is never held back or thinned out (a plain minimum
 /// interval drops frames that arrive a little early, and drifts).
+///
+/// Times are seconds on any clock that only grows (see `pose_task`).
 struct RateLimit {
     rate_hz: f64,
     tokens: f64,
-    last: Option<tokio::time::Instant>,
+    last_s: Option<f64>,
 }
 
 impl RateLimit {
@@ -186,37 +241,39 @@ impl RateLimit {
         Self {
             rate_hz,
             tokens: Self::BURST,
-            last: None,
+            last_s: None,
         }
     }
 
-    fn refill(&mut self, now: tokio::time::Instant) {
-        if let Some(last) = self.last {
-            let earned = now.saturating_duration_since(last).as_secs_f64() * self.rate_hz;
+    fn refill(&mut self, now_s: f64) {
+        if let Some(last) = self.last_s {
+            let earned = (now_s - last).max(0.0) * self.rate_hz;
             self.tokens = (self.tokens + earned).min(Self::BURST);
         }
-        self.last = Some(now);
+        self.last_s = Some(now_s);
     }
 
-    /// When the next send may go, if not now; `None` without a limit.
-    fn wait_until(&mut self, now: tokio::time::Instant) -> Option<tokio::time::Instant> {
+    /// How long until the next send may go, if not now; `None` without a
+    /// limit.
+    fn wait_s(&mut self, now_s: f64) -> Option<Duration> {
         if self.rate_hz <= 0.0 {
             return None;
         }
-        self.refill(now);
+        self.refill(now_s);
+        // A hair below one token is a whole one: the capture times of a
+        // source at exactly the limit rate must not be thinned by rounding.
         // The config keeps the rate within [0.1, 10000] Hz; the wait is
         // bounded anyway, so no rate can make this overflow (issue 16).
-        (self.tokens < 1.0).then(|| {
-            let wait = Duration::try_from_secs_f64((1.0 - self.tokens) / self.rate_hz)
+        (self.tokens < 1.0 - 1e-9).then(|| {
+            Duration::try_from_secs_f64((1.0 - self.tokens) / self.rate_hz)
                 .unwrap_or(Duration::MAX)
-                .min(Duration::from_secs(10));
-            now + wait
+                .min(Duration::from_secs(10))
         })
     }
 
-    fn spend(&mut self, now: tokio::time::Instant) {
+    fn spend(&mut self, now_s: f64) {
         if self.rate_hz > 0.0 {
-            self.refill(now);
+            self.refill(now_s);
             self.tokens = (self.tokens - 1.0).max(0.0);
         }
     }
@@ -305,7 +362,12 @@ pub(crate) async fn connection_task(
                 _ = sleep_until(wake) => break,
                 _ = shutdown.changed() => return,
                 o = out.recv() => match o {
-                    Some(_) => bump(&ctx.counters.dropped_outgoing, 1),
+                    Some(o) => {
+                        bump(&ctx.counters.dropped_outgoing, 1);
+                        if o.last {
+                            ctx.handoff.done(o.capture_time_ns);
+                        }
+                    }
                     None => return,
                 },
             }
@@ -352,12 +414,19 @@ impl Connection {
                 _ = shutdown.changed() => return End::Shutdown,
                 o = out.recv() => match o {
                     Some(o) => {
-                        if self.ctx.is_stale(o.capture_time_ns, unix_now_ns()) {
+                        if self.ctx.is_stale(o.capture_time_ns) {
                             bump(&self.ctx.counters.stale, 1);
-                            continue;
+                        } else {
+                            let sent = self.send(&mut transport, &o.message, Some(o.capture_time_ns)).await;
+                            if let Err(e) = sent {
+                                if o.last {
+                                    self.ctx.handoff.done(o.capture_time_ns);
+                                }
+                                return e;
+                            }
                         }
-                        if let Err(e) = self.send(&mut transport, &o.message, Some(o.capture_time_ns)).await {
-                            return e;
+                        if o.last {
+                            self.ctx.handoff.done(o.capture_time_ns);
                         }
                     }
                     None => return End::Shutdown,
@@ -466,7 +535,7 @@ impl Connection {
             Ok(Ok(true)) => {
                 self.ctx.counters.count_sent(message.name());
                 self.ctx.events.push(LinkEvent {
-                    time_ns: write_started_ns,
+                    time_ns: self.ctx.event_time_ns(write_started_ns),
                     outgoing: true,
                     name: message.name().to_string(),
                     capture_time_ns,
@@ -510,6 +579,7 @@ impl Connection {
         if from_system == u32::from(cfg.system_id) && from_component == cfg.component_id {
             return Ok(());
         }
+        let event_ns = self.ctx.event_time_ns(now_ns);
         self.ctx.events.push_incoming(|| {
             let mut fields = messages::fields_json(&m.message);
             if let Some(obj) = fields.as_object_mut() {
@@ -519,7 +589,7 @@ impl Connection {
                 obj.insert("signed".into(), m.signed.into());
             }
             LinkEvent {
-                time_ns: now_ns,
+                time_ns: event_ns,
                 outgoing: false,
                 name: m.message.message_name().to_string(),
                 capture_time_ns: None,
@@ -573,5 +643,114 @@ impl Connection {
             _ => {}
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::config::Config;
+    use crate::link::messages::tests::detection;
+    use crate::link::telemetry::CONVERGED_REPLIES;
+    use crate::measure::StageTimes;
+    use mavlink::dialects::development as dev;
+    use nalgebra::Vector3;
+
+    const CAPTURE_NS: u64 = 1_700_000_000_123_456_789;
+    /// The autopilot's clock (µs since its boot, as ns) minus ours.
+    const AUTOPILOT_MINUS_OURS_NS: i64 = -1_699_999_000_000_000_000;
+
+    fn context(cfg: &super::super::LinkConfig) -> Context {
+        Context {
+            settings: Arc::new(super::super::validate(cfg, None).unwrap()),
+            counters: Arc::default(),
+            telemetry: Arc::new(Mutex::new(Telemetry::new(50_000_000))),
+            events: super::super::events::event_queue(8, 10.0).0,
+            stopped: Arc::default(),
+            clock: RunClock::wall(),
+            handoff: Arc::default(),
+        }
+    }
+
+    /// Our TIMESYNC requests answered by the autopilot (1 ms each way).
+    fn converge(ctx: &Context) {
+        let mut tm = lock(&ctx.telemetry);
+        for k in 0..CONVERGED_REPLIES as i64 {
+            let ts1 = 1_700_000_000_000_000_000 + k * 1_000_000_000;
+            tm.timesync.request_sent(ts1);
+            assert!(tm.timesync.reply(
+                ts1 + 1_000_000 + AUTOPILOT_MINUS_OURS_NS,
+                ts1,
+                ts1 + 2_000_000
+            ));
+        }
+    }
+
+    fn target_relative_timestamp_us(ctx: &Context) -> u64 {
+        let m = Measurement {
+            seq: 1,
+            capture_time_ns: CAPTURE_NS,
+            detection: Some(detection(
+                Vector3::new(6.0, 0.5, -0.3),
+                Vector3::new(-1.0, 0.0, 0.0),
+            )),
+            tracked: false,
+            times: StageTimes::default(),
+        };
+        let mut out = Vec::new();
+        build_pose_messages(ctx, &m, &mut out);
+        match out.as_slice() {
+            [Outbound::Development(dev::MavMessage::TARGET_RELATIVE(t))] => t.timestamp,
+            other => panic!("not one TARGET_RELATIVE: {}", other.len()),
+        }
+    }
+
+    /// PX4's receiver maps a companion's stamp with its own timesync
+    /// (`Timesync::sync_stamp`: the stamp plus the offset PX4 measured
+    /// against our TIMESYNC replies once converged, else its arrival time),
+    /// and the message defines `timestamp` as Unix time (README, "PX4:
+    /// TARGET_RELATIVE"). So by default it is the capture time on our Unix
+    /// clock, also once our own TIMESYNC has converged; "autopilot" moves it
+    /// onto the autopilot's clock only then.
+    #[test]
+    fn target_relative_timestamp_is_our_clock_by_default_even_once_converged() {
+        let mut cfg = Config::embedded().link;
+        assert_eq!(cfg.target_relative_clock, TimeClock::Own);
+        cfg.messages = vec![PoseMessage::TargetRelative];
+        let ours_us = CAPTURE_NS / 1000;
+        let own = context(&cfg);
+        assert_eq!(target_relative_timestamp_us(&own), ours_us);
+        converge(&own);
+        assert_eq!(target_relative_timestamp_us(&own), ours_us);
+
+        cfg.target_relative_clock = TimeClock::Autopilot;
+        let autopilot = context(&cfg);
+        // Not converged: our clock, PX4 maps it as for "own".
+        assert_eq!(target_relative_timestamp_us(&autopilot), ours_us);
+        converge(&autopilot);
+        let want_us = (CAPTURE_NS as i64 + AUTOPILOT_MINUS_OURS_NS) as u64 / 1000;
+        assert_eq!(target_relative_timestamp_us(&autopilot), want_us);
+        assert_eq!(
+            want_us, 1_000_123_456,
+            "the autopilot's clock: 1000.1 s since boot"
+        );
+    }
+
+    #[test]
+    fn the_rate_limit_passes_a_source_at_its_rate_and_thins_a_faster_one() {
+        // 30 fps capture times against a 30 Hz limit: all pass (a hair of
+        // rounding is not a missing token); 60 fps against 30 Hz: half.
+        for (fps, limit_hz, want) in [(30.0, 30.0, 300), (30.0, 50.0, 300), (60.0, 30.0, 151)] {
+            let mut limit = RateLimit::new(limit_hz);
+            let mut sent = 0;
+            for k in 0..300u64 {
+                let now_s = k as f64 / fps;
+                if limit.wait_s(now_s).is_none() {
+                    limit.spend(now_s);
+                    sent += 1;
+                }
+            }
+            assert_eq!(sent, want, "{fps} fps at {limit_hz} Hz");
+        }
     }
 }

@@ -34,6 +34,9 @@ pub struct LinkStats {
     /// Measurements dropped because they were older than `max_age_ms` when
     /// their turn to be sent came.
     pub stale: u64,
+    /// `--fast`: detected measurements not sent because they came faster
+    /// than `max_rate_hz` on the source's clock (live runs wait instead).
+    pub rate_limited: u64,
     /// Measurements superseded by a newer one before the pose task looked at
     /// them (latest-wins and the rate limit; includes one still pending).
     pub superseded: u64,
@@ -78,6 +81,7 @@ pub(crate) struct Counters {
     pub io_errors: AtomicU64,
     pub no_detection: AtomicU64,
     pub stale: AtomicU64,
+    pub rate_limited: AtomicU64,
     /// Measurements handed to `submit()`.
     pub submitted: AtomicU64,
     /// Measurements the pose task looked at (the rest were superseded).
@@ -161,6 +165,7 @@ impl Counters {
             io_errors: get(&self.io_errors),
             no_detection: get(&self.no_detection),
             stale: get(&self.stale),
+            rate_limited: get(&self.rate_limited),
             superseded: get(&self.submitted).saturating_sub(get(&self.considered)),
             no_vehicle_pose: get(&self.no_vehicle_pose),
             invalid_measurement: get(&self.invalid_measurement),

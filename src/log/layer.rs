@@ -1,6 +1,6 @@
 //! A tracing layer that copies events to `/log` (foxglove.Log).
 
-use super::{LogEvent, LogHandle, storage, writer::ON_WRITER_THREAD};
+use super::{LogEvent, LogHandle, writer::ON_WRITER_THREAD};
 use foxglove::messages::log::Level;
 use std::fmt::Write as _;
 use tracing::field::{Field, Visit};
@@ -64,7 +64,7 @@ impl<S: Subscriber> Layer<S> for LogLayer {
         event.record(&mut text);
         text.message.push_str(&text.fields);
         self.handle.log_event(LogEvent {
-            time_ns: storage::now_ns(),
+            time_ns: self.handle.now_ns(),
             level: level(meta.level()),
             message: text.message,
             name: meta.target().to_string(),

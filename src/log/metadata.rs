@@ -91,6 +91,9 @@ pub struct RunProvenance {
     pub camera_file: String,
     /// The MAVLink connection in use (`--mavlink` or `[link] connection`).
     pub mavlink: String,
+    /// The clock of the log's times: `wall`, or `source` for `run --fast`
+    /// (the source's capture time base, see [`crate::clock`]).
+    pub clock: String,
 }
 
 /// The run's metadata record ([`RUN_METADATA`]): version, git hash, the
@@ -113,6 +116,7 @@ pub fn run_metadata(config: &crate::config::Config, p: &RunProvenance) -> BTreeM
         m.insert(format!("source.{k}"), v.clone());
     }
     m.insert("mavlink.connection".into(), p.mavlink.clone());
+    m.insert("clock".into(), p.clock.clone());
     m.insert(
         "mavlink.system_id".into(),
         config.link.system_id.to_string(),

@@ -7,6 +7,12 @@
 //! a full queue drops the item and counts it; a write error is reported and the
 //! writer retries with a new file later.
 //!
+//! Every message's log time is the frame's capture time when it comes from
+//! a frame, else "now" on the run's clock ([`LogHandle::set_clock`]): the
+//! wall clock, or with `run --fast` the source's, so that every topic of a
+//! fast replay uses the source's capture time base and the log spans the
+//! run's real length ([`crate::clock`]).
+//!
 //! Also here: start-up recovery and `recover` ([`recover`]), replay of
 //! `/camera/image` ([`replay`]) and the post-flight review ([`review`]).
 
@@ -179,6 +185,26 @@ impl LogError {
     }
 }
 
+/// Checks that `path` is a file starting with the MCAP magic, before a
+/// command creates anything: a missing, unreadable or foreign input is
+/// [`LogError::Format`] (exit status 2), and nothing is left behind.
+pub fn check_mcap_input(path: &Path) -> Result<(), LogError> {
+    use std::io::Read;
+    let not_readable = |why: String| Err(LogError::format(path, why));
+    if path.is_dir() {
+        return not_readable("a folder, not a file".into());
+    }
+    let mut file = match std::fs::File::open(path) {
+        Ok(f) => f,
+        Err(e) => return not_readable(format!("cannot open it: {e}")),
+    };
+    let mut magic = [0u8; 8];
+    if file.read_exact(&mut magic).is_err() || magic.as_slice() != mcap::MAGIC {
+        return not_readable("no MCAP magic at the start".into());
+    }
+    Ok(())
+}
+
 /// An error with its causes ("I/O error: No space left on device"): the
 /// `mcap` crate's errors hide the io::Error in `source()`.
 pub(crate) fn error_chain(e: &dyn std::error::Error) -> String {
@@ -252,13 +278,25 @@ pub(crate) struct Counters {
     pub dropped_queue_full: AtomicU64,
     /// Items in the queue now (pushed, not yet taken by the writer).
     pub queued: AtomicU64,
+    /// The clock of the log times not taken from a frame.
+    pub clock: std::sync::RwLock<crate::clock::RunClock>,
+}
+
+impl Counters {
+    /// Now on the log's clock.
+    pub fn now_ns(&self) -> u64 {
+        self.clock
+            .read()
+            .unwrap_or_else(|p| p.into_inner())
+            .now_ns()
+    }
 }
 
 struct Shared {
     tx: SyncSender<Item>,
     /// Wait for room instead of dropping (offline `process --log`: nothing
     /// is live, and nothing may be lost).
-    blocking: bool,
+    blocking: std::sync::atomic::AtomicBool,
     counters: Arc<Counters>,
     thread: Mutex<Option<JoinHandle<LogSummary>>>,
 }
@@ -358,7 +396,7 @@ impl FlightLog {
         Ok(LogHandle {
             shared: Arc::new(Shared {
                 tx,
-                blocking,
+                blocking: blocking.into(),
                 counters,
                 thread: Mutex::new(Some(thread)),
             }),
@@ -372,7 +410,7 @@ impl LogHandle {
         let counters = &self.shared.counters;
         // Counted before the send: the writer may take the item at once.
         counters.queued.fetch_add(1, Ordering::Relaxed);
-        let sent = if self.shared.blocking {
+        let sent = if self.shared.blocking.load(Ordering::Relaxed) {
             self.shared.tx.send(item).is_ok()
         } else {
             match self.shared.tx.try_send(item) {
@@ -384,6 +422,29 @@ impl LogHandle {
             counters.queued.fetch_sub(1, Ordering::Relaxed);
             counters.dropped_queue_full.fetch_add(1, Ordering::Relaxed);
         }
+    }
+
+    /// Puts the log times not taken from a frame (`/log`, `/drogue/stats`
+    /// without a time, the writer's own reports) on `clock` (default: the
+    /// wall clock).
+    pub fn set_clock(&self, clock: crate::clock::RunClock) {
+        *self
+            .shared
+            .counters
+            .clock
+            .write()
+            .unwrap_or_else(|p| p.into_inner()) = clock;
+    }
+
+    /// Wait for room in the queue instead of dropping (`run --fast`: nothing
+    /// is live there, so nothing may be lost).
+    pub fn set_waiting(&self, wait: bool) {
+        self.shared.blocking.store(wait, Ordering::Relaxed);
+    }
+
+    /// Now on the log's clock (see [`LogHandle::set_clock`]).
+    pub fn now_ns(&self) -> u64 {
+        self.shared.counters.now_ns()
     }
 
     /// Items waiting in the queue for the writer now (for the run's

@@ -576,7 +576,7 @@ impl<W: Write + Seek> Copier<W> {
 }
 
 /// Copies every message `input` still holds into a new complete file
-/// `output` (zstd chunks). Fails when `input` is not an MCAP file
+/// `output` (zstd chunks). Fails when `input` is missing or not an MCAP file
 /// ([`LogError::Format`]), when `output` is the input or cannot be written
 /// ([`LogError::Io`], [`LogError::Config`]), or when the copy would hold
 /// fewer messages than the `mcap` crate reads from the input
@@ -588,6 +588,8 @@ pub fn recover(input: &Path, output: &Path) -> Result<RecoverReport, LogError> {
             output.display()
         )));
     }
+    // A missing or foreign input is the input's fault (exit status 2).
+    super::check_mcap_input(input)?;
     let file = File::open(input).map_err(|e| LogError::io(input, e))?;
     let len = file.metadata().map_err(|e| LogError::io(input, e))?.len();
     let mut src = Input {

@@ -322,7 +322,7 @@ impl Writer {
         let t = record
             .get("time_ns")
             .and_then(|v| v.as_u64())
-            .unwrap_or_else(storage::now_ns);
+            .unwrap_or_else(|| self.counters.now_ns());
         let mut buf = std::mem::take(&mut self.buf);
         self.write_json(topics::STATS, 0, t, t, record, &mut buf);
         self.buf = buf;
@@ -520,7 +520,7 @@ impl Writer {
             _ => tracing::info!(target: "drogue_vision::log", "{message}"),
         }
         let event = LogEvent {
-            time_ns: storage::now_ns(),
+            time_ns: self.counters.now_ns(),
             level,
             message,
             name: "drogue_vision::log".into(),

@@ -144,6 +144,8 @@ pub struct ReviewReport {
     pub processing_ms: Histogram,
     /// Capture to pose sent, ms (when the log has it).
     pub latency_ms: Histogram,
+    /// The log is on the source's clock (`run --fast`): no latency in it.
+    pub source_clock: bool,
     pub mavlink_out: BTreeMap<String, u64>,
     pub mavlink_in: BTreeMap<String, u64>,
     pub heartbeats_in: u64,
@@ -202,6 +204,8 @@ truth_range_m,position_error_m,normal_error_deg";
 /// folder. An existing `out_dir` is replaced only when it is empty or an
 /// earlier review (it holds `poses.csv`).
 pub fn review(log: &Path, out_dir: &Path) -> Result<ReviewReport, LogError> {
+    // Before any folder is made: a bad input leaves nothing behind.
+    super::check_mcap_input(log)?;
     if out_dir.exists() {
         let earlier_review = out_dir.join("poses.csv").is_file();
         let empty = std::fs::read_dir(out_dir)
@@ -268,6 +272,13 @@ fn review_into(log: &Path, out_dir: &Path) -> Result<ReviewReport, LogError> {
         by_range: stats::range_bins(),
         ..Default::default()
     };
+    // `run --fast` stamps its messages on the source's clock, which stands
+    // still while a frame is processed: capture → send is no latency there.
+    let source_clock = r.metadata.iter().any(|(name, values)| {
+        name == super::metadata::RUN_METADATA
+            && values.get("clock").map(String::as_str) == Some("source")
+    });
+    r.source_clock = source_clock;
     let mut last_frame_seq: Option<u32> = None;
     let mut last_heartbeat: Option<u64> = None;
     let mut last_sent_capture: Option<u64> = None;
@@ -401,6 +412,7 @@ fn review_into(log: &Path, out_dir: &Path) -> Result<ReviewReport, LogError> {
                 let incoming = m.channel.topic == topics::MAVLINK_IN;
                 // Capture → send latency: the first pose message sent for a frame.
                 if !incoming
+                    && !source_clock
                     && let (Some(sent), Some(captured)) = (l.time_ns, l.capture_time_ns)
                     && last_sent_capture != Some(captured)
                 {
@@ -569,7 +581,14 @@ impl fmt::Display for ReviewReport {
             100.0 * self.detection_rate()
         )?;
         writeln!(f, "processing {}", percentiles(&self.processing_ms))?;
-        writeln!(f, "latency    {}", percentiles(&self.latency_ms))?;
+        if self.source_clock {
+            writeln!(
+                f,
+                "latency    not measured (run --fast: the log is on the source's clock)"
+            )?;
+        } else {
+            writeln!(f, "latency    {}", percentiles(&self.latency_ms))?;
+        }
         let sent: u64 = self.mavlink_out.values().sum();
         let sent_list: Vec<String> = self
             .mavlink_out
