@@ -138,9 +138,7 @@ impl Scene {
                     );
                 }
             }
-            // Box-Muller.
-            let (r1, r2): (f64, f64) = (rng.random::<f64>().max(1e-12), rng.random());
-            let n = noise * (-2.0 * r1.ln()).sqrt() * (std::f64::consts::TAU * r2).cos();
+            let n = noise * gauss(&mut rng);
             Luma([(sum / 64.0 + n).round().clamp(0.0, 255.0) as u8])
         })
     }
@@ -162,13 +160,18 @@ fn motion_blur(img: &GrayImage, du: f64, dv: f64, taps: usize) -> GrayImage {
     })
 }
 
+/// A standard normal draw (Box-Muller).
+fn gauss(rng: &mut ChaCha8Rng) -> f64 {
+    let (r1, r2): (f64, f64) = (rng.random::<f64>().max(1e-12), rng.random());
+    (-2.0 * r1.ln()).sqrt() * (std::f64::consts::TAU * r2).cos()
+}
+
 /// `img` plus Gaussian noise of deviation `sigma` (sensor noise comes after
 /// the optics' blur).
 fn add_noise(img: &GrayImage, sigma: f64, seed: u64) -> GrayImage {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     GrayImage::from_fn(img.width(), img.height(), |x, y| {
-        let (r1, r2): (f64, f64) = (rng.random::<f64>().max(1e-12), rng.random());
-        let n = sigma * (-2.0 * r1.ln()).sqrt() * (std::f64::consts::TAU * r2).cos();
+        let n = sigma * gauss(&mut rng);
         Luma([(f64::from(img.get_pixel(x, y)[0]) + n)
             .round()
             .clamp(0.0, 255.0) as u8])
