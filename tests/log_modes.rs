@@ -181,6 +181,22 @@ fn crop_mode_logs_full_frames_every_nth_and_a_crop_around_the_drogue_on_every_fr
         .collect();
     assert_eq!(records.len(), expected.len());
     assert!(records.iter().all(|r| r["detected"] == true));
+
+    // `review` counts no frame lost for the full frames the mode leaves out.
+    let review = Command::new(BIN)
+        .arg("review")
+        .arg(&log)
+        .arg("--out")
+        .arg(dir.path().join("review"))
+        .output()
+        .expect("review");
+    assert!(review.status.success());
+    let text = String::from_utf8_lossy(&review.stdout);
+    let line = format!(
+        "frames     {} logged (crop mode: full frames every {EVERY}th, crops on /camera/crop), 0 lost",
+        expected.len()
+    );
+    assert!(text.contains(&line), "{text}");
 }
 
 #[test]
