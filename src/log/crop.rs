@@ -221,6 +221,52 @@ mod tests {
         assert!(crop_rect(&Ellipse::new(f64::NAN, 100.0, 20.0, 20.0, 0.0), 2.0, &cam).is_none());
     }
 
+    fn frame(seq: u64) -> Arc<Frame> {
+        Arc::new(Frame {
+            seq,
+            capture_time_ns: seq * 100_000_000,
+            image: image::GrayImage::new(1280, 960),
+            origin: crate::frame::FrameOrigin::Camera {
+                device: "test".into(),
+            },
+        })
+    }
+
+    fn seqs(crops: &[Crop]) -> Vec<(u64, CropBasis)> {
+        crops.iter().map(|c| (c.frame.seq, c.basis)).collect()
+    }
+
+    /// Frames wait for their measurement; an undetected or unmeasured frame
+    /// is cropped around the last detection within HOLD_NS, else not at all.
+    #[test]
+    fn frames_are_cropped_when_measured_around_the_detection_or_the_last_one() {
+        let e = Ellipse::new(640.0, 480.0, 20.0, 18.0, 0.0);
+        let mut c = Cropper::new(2.0, camera([0.0; 5]));
+        assert!(c.frame(frame(0)).is_empty());
+        // Nothing detected yet: no crop.
+        assert!(c.measurement(0, 0, None).is_empty());
+        c.frame(frame(1));
+        c.frame(frame(2));
+        let crops = c.measurement(1, 100_000_000, Some(&e));
+        assert_eq!(seqs(&crops), [(1, CropBasis::Detection)]);
+        // Frame 2 was never measured: cropped around frame 1's detection
+        // when frame 3's (undetected) measurement comes.
+        c.frame(frame(3));
+        let crops = c.measurement(3, 300_000_000, None);
+        let expected = [(2, CropBasis::LastDetection), (3, CropBasis::LastDetection)];
+        assert_eq!(seqs(&crops), expected);
+        // More than a second after the last detection: no crop.
+        c.frame(frame(15));
+        assert!(c.measurement(15, 1_500_000_000, None).is_empty());
+        // The wait is bounded; the rest comes out at the end.
+        c.measurement(16, 1_600_000_000, Some(&e));
+        let pushed: Vec<Crop> = (17..17 + MAX_PENDING as u64 + 2)
+            .flat_map(|s| c.frame(frame(s)))
+            .collect();
+        assert_eq!(pushed.len(), 2);
+        assert_eq!(c.drain().len(), MAX_PENDING);
+    }
+
     #[test]
     fn distorted_ring_points_lie_in_the_crop() {
         let cam = camera([-0.2, 0.05, 0.001, -0.001, 0.0]);
