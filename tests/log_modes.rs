@@ -44,8 +44,11 @@ fn run_log(dir: &Path, log_toml: &str, frames: u32, port: u16) -> Vec<u8> {
     std::fs::read(log).expect("log")
 }
 
-/// Messages of a log by topic: (sequence, schema name, data).
-fn by_topic(bytes: &[u8]) -> BTreeMap<String, Vec<(u64, String, Vec<u8>)>> {
+/// Messages by topic: (sequence, schema name, data).
+type Topics = BTreeMap<String, Vec<(u64, String, Vec<u8>)>>;
+
+/// Messages of a log by topic.
+fn by_topic(bytes: &[u8]) -> Topics {
     let mut out: BTreeMap<String, Vec<_>> = BTreeMap::new();
     for m in mcap::MessageStream::new(bytes).expect("mcap") {
         let m = m.expect("message");
@@ -65,7 +68,7 @@ fn gray(c: &CompressedImage, format: image::ImageFormat) -> image::GrayImage {
         .into_luma8()
 }
 
-fn camera_of(topics: &BTreeMap<String, Vec<(u64, String, Vec<u8>)>>) -> CameraModel {
+fn camera_of(topics: &Topics) -> CameraModel {
     let cal = CameraCalibration::decode(topics["/camera/calibration"][0].2.as_slice())
         .expect("calibration");
     topics::camera_from_calibration(&cal).expect("camera")
@@ -95,7 +98,9 @@ fn crop_mode_logs_full_frames_every_nth_and_a_crop_around_the_drogue_on_every_fr
             (*seq, gray(&c, image::ImageFormat::Png))
         })
         .collect();
-    let expected: Vec<u64> = (0..u64::from(FRAMES)).filter(|s| s % EVERY == 0).collect();
+    let expected: Vec<u64> = (0..u64::from(FRAMES))
+        .filter(|s| s.is_multiple_of(EVERY))
+        .collect();
     assert_eq!(full.keys().copied().collect::<Vec<_>>(), expected);
 
     // A crop and its place on every frame (the drogue is detected on all).

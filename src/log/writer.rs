@@ -257,7 +257,8 @@ impl Writer {
         let seq = frame.seq;
         let mut buf = std::mem::take(&mut self.buf);
         // The crop mode keeps only every full_frame_every-th full frame.
-        let full = self.cropper.is_none() || seq % u64::from(self.cfg.full_frame_every) == 0;
+        let full =
+            self.cropper.is_none() || seq.is_multiple_of(u64::from(self.cfg.full_frame_every));
         let encoded = if full {
             topics::image(
                 frame,
