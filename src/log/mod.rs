@@ -13,6 +13,10 @@
 //! fast replay uses the source's capture time base and the log spans the
 //! run's real length ([`crate::clock`]).
 //!
+//! `/camera/image` is PNG by default ([`png_gray`]); the opt-in long-flight
+//! modes are JPEG ([`topics::jpeg`]) and full frames at a lower rate with a
+//! crop around the drogue on every frame ([`crop`]).
+//!
 //! Also here: start-up recovery and `recover` ([`recover`]), replay of
 //! `/camera/image` ([`replay`]) and the post-flight review ([`review`]).
 
