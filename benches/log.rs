@@ -270,6 +270,31 @@ fn frame_encoding(c: &mut Criterion) {
             v
         })
     });
+    let mut jpeg = Vec::new();
+    drogue_vision::log::topics::jpeg(&raw, w, h, 90, &mut jpeg).unwrap();
+    let mut image_jpeg = Vec::new();
+    image::codecs::jpeg::JpegEncoder::new_with_quality(&mut image_jpeg, 90)
+        .encode(&raw, w, h, image::ExtendedColorType::L8)
+        .unwrap();
+    println!(
+        "JPEG quality 90: log (jpeg-encoder) {} B ({:.2}x), image crate {} B ({:.2}x)",
+        jpeg.len(),
+        raw.len() as f64 / jpeg.len() as f64,
+        image_jpeg.len(),
+        raw.len() as f64 / image_jpeg.len() as f64
+    );
+    group.bench_function("log_jpeg_q90", |b| {
+        b.iter(|| drogue_vision::log::topics::jpeg(black_box(&raw), w, h, 90, &mut jpeg).unwrap())
+    });
+    group.bench_function("image_crate_jpeg_q90", |b| {
+        b.iter(|| {
+            let mut v = Vec::with_capacity(raw.len());
+            image::codecs::jpeg::JpegEncoder::new_with_quality(&mut v, 90)
+                .encode(black_box(&raw), w, h, image::ExtendedColorType::L8)
+                .unwrap();
+            v
+        })
+    });
     group.finish();
 }
 

@@ -120,6 +120,9 @@ pub const RANGES: &[(&str, Range)] = &[
     ("log.chunk_size_kib", Range::closed(1.0, 65_536.0)),
     ("log.retry_after_error_s", Range::closed(1.0, 86_400.0)),
     ("log.compression_level", Range::closed(0.0, 19.0)),
+    ("log.jpeg_quality", Range::closed(1.0, 100.0)),
+    ("log.full_frame_every", Range::closed(1.0, 100_000.0)),
+    ("log.crop_margin", Range::closed(1.0, 4.0)),
     ("run.vehicle_pose_timeout_s", Range::above(0.0, 86_400.0)),
     ("run.vehicle_pose_delay_ms", Range::closed(0.0, 10_000.0)),
     ("run.realtime_priority", Range::closed(0.0, 99.0)),
@@ -345,7 +348,9 @@ impl Config {
         }
         self.fit.validate().map_err(|e| format!("[fit] {e}"))?;
         self.track_check()?;
-        self.log.validate().map_err(|e| e.to_string())?;
+        let mut log = self.log.clone();
+        log.set_drogue(self.drogue.inner_radius_m, self.drogue.canopy_radius_m);
+        log.validate().map_err(|e| e.to_string())?;
         self.v4l.validate()?;
         crate::measure::mount::Mount::from_config(&self.mount)
             .map_err(|e| format!("[mount] {e}"))?;

@@ -102,4 +102,47 @@ fn replaying_a_log_reproduces_its_detections_exactly() {
         .map(|m| serde_json::from_slice(&m.data).expect("json"))
         .collect();
     assert_eq!(relogged, replayed);
+
+    // And the same `drogue_vision.run` metadata record as `run` writes (read
+    // with the mcap crate's record reader), saying where the frames came from.
+    let run_meta = run_metadata(&bytes);
+    let relog_meta = run_metadata(&relog_bytes);
+    let keys = |m: &BTreeMap<String, String>| -> Vec<String> {
+        m.keys()
+            .filter(|k| !k.starts_with("source."))
+            .cloned()
+            .collect()
+    };
+    assert_eq!(keys(&relog_meta), keys(&run_meta));
+    for key in ["version", "git_hash"] {
+        assert_eq!(relog_meta[key], run_meta[key], "{key}");
+    }
+    assert_eq!(relog_meta["source"], format!("mcap:{}", log.display()));
+    assert_eq!(relog_meta["source.replayed_log"], log.display().to_string());
+    assert_eq!(relog_meta["clock"], "source");
+    for key in ["config_toml", "mount_toml"] {
+        let parsed: toml::Table = toml::from_str(&relog_meta[key]).expect(key);
+        assert!(!parsed.is_empty(), "{key} is empty");
+    }
+    let config: toml::Table = toml::from_str(&relog_meta["config_toml"]).expect("config");
+    for section in ["drogue", "detect", "mount", "log", "link"] {
+        assert!(
+            config.contains_key(section),
+            "config_toml has no [{section}]"
+        );
+    }
+}
+
+/// The `drogue_vision.run` metadata record of a log.
+fn run_metadata(bytes: &[u8]) -> BTreeMap<String, String> {
+    let mut found = Vec::new();
+    for record in mcap::read::LinearReader::new(bytes).expect("mcap") {
+        if let mcap::records::Record::Metadata(m) = record.expect("record")
+            && m.name == "drogue_vision.run"
+        {
+            found.push(m.metadata);
+        }
+    }
+    assert!(!found.is_empty(), "no drogue_vision.run metadata");
+    found.swap_remove(0)
 }

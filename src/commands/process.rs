@@ -149,6 +149,31 @@ fn open_input(args: &ProcessArgs) -> Result<(NamedFrames, CameraModel, usize, u6
     )))
 }
 
+/// What the log's `drogue_vision::run` metadata says about the input: the
+/// source in `run --source` terms (`mcap:` or `dir:`), the camera file, and
+/// no MAVLink (`process` sends none).
+fn provenance(args: &ProcessArgs) -> crate::log::metadata::RunProvenance {
+    let input = args.input.display().to_string();
+    let (source, source_details) = if args.input.is_dir() {
+        (format!("dir:{input}"), vec![("folder".into(), input)])
+    } else {
+        (
+            format!("mcap:{input}"),
+            vec![("replayed_log".into(), input)],
+        )
+    };
+    crate::log::metadata::RunProvenance {
+        source,
+        source_details,
+        camera_file: match &args.camera {
+            Some(c) => c.display().to_string(),
+            None => "(the input log's /camera/calibration)".into(),
+        },
+        mavlink: "none (process sends no MAVLink)".into(),
+        clock: "source".into(),
+    }
+}
+
 /// Runs `process`. Progress on stderr when it is a terminal.
 pub fn run(args: &ProcessArgs) -> Result<ProcessSummary, ProcessError> {
     let setup = |e: String| ProcessError::Setup(e);
@@ -177,9 +202,11 @@ pub fn run(args: &ProcessArgs) -> Result<ProcessSummary, ProcessError> {
     let mount = Mount::from_config(&config.mount).map_err(setup)?;
     let camera_size = (camera.width, camera.height);
     let mut measurer = Measurer::new(camera.clone(), &config).map_err(|e| setup(e.to_string()))?;
+    let mut log_config = config.log.clone();
+    log_config.set_drogue(config.drogue.inner_radius_m, config.drogue.canopy_radius_m);
     let log = match &args.log {
         Some(path) => Some(
-            FlightLog::start_file(&config.log, path, &camera).map_err(|e| {
+            FlightLog::start_file(&log_config, path, &camera).map_err(|e| {
                 ProcessError::Output {
                     path: path.display().to_string(),
                     message: e.to_string(),
@@ -188,6 +215,16 @@ pub fn run(args: &ProcessArgs) -> Result<ProcessSummary, ProcessError> {
         ),
         None => None,
     };
+    // The log's times are the frames' capture times (the input's own, or
+    // made up for a folder): every topic on that clock, as `run --fast`.
+    let clock = crate::clock::RunClock::source(0);
+    if let Some(log) = &log {
+        log.set_clock(clock.clone());
+        log.metadata(
+            crate::log::metadata::RUN_METADATA,
+            crate::log::metadata::run_metadata(&config, &provenance(args)),
+        );
+    }
 
     let out_err = |e: std::io::Error| ProcessError::Output {
         path: args.out.display().to_string(),
@@ -225,6 +262,8 @@ pub fn run(args: &ProcessArgs) -> Result<ProcessSummary, ProcessError> {
                 if args.independent {
                     measurer.forget_track();
                 }
+                clock.start_at(frame.capture_time_ns);
+                clock.advance_to(frame.capture_time_ns);
                 let t = Instant::now();
                 let m = measurer.measure(&frame);
                 measure_time += t.elapsed();

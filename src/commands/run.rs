@@ -646,7 +646,9 @@ pub fn run(
         .log_dir
         .clone()
         .unwrap_or_else(|| config.log.dir.clone());
-    let log = FlightLog::start(&config.log, &log_dir, &camera)
+    let mut log_config = config.log.clone();
+    log_config.set_drogue(config.drogue.inner_radius_m, config.drogue.canopy_radius_m);
+    let log = FlightLog::start(&log_config, &log_dir, &camera)
         .map_err(|e| RunError::Setup(e.to_string()))?;
     log.set_clock(clock.clone());
     // --fast: nothing is live, so the log waits for room rather than drop.

@@ -13,9 +13,14 @@
 //! fast replay uses the source's capture time base and the log spans the
 //! run's real length ([`crate::clock`]).
 //!
+//! `/camera/image` is PNG by default ([`png_gray`]); the opt-in long-flight
+//! modes are JPEG ([`topics::jpeg`]) and full frames at a lower rate with a
+//! crop around the drogue on every frame ([`crop`]).
+//!
 //! Also here: start-up recovery and `recover` ([`recover`]), replay of
 //! `/camera/image` ([`replay`]) and the post-flight review ([`review`]).
 
+pub mod crop;
 mod layer;
 pub mod metadata;
 pub mod png_gray;
@@ -44,8 +49,10 @@ pub use layer::LogLayer;
 pub use storage::{FileStorage, Storage, StorageFile};
 pub use topics::MountTransforms;
 
-/// How `/camera/image` stores the frames. Both are lossless, so a replay
-/// reproduces the logged detections exactly.
+/// How `/camera/image` stores the frames. `raw` and `png` are lossless and
+/// keep every frame, so a replay reproduces the logged detections exactly;
+/// `jpeg` and `crop` are the opt-in long-flight modes, which give that up
+/// (README, "Size").
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum ImageEncoding {
@@ -54,6 +61,18 @@ pub enum ImageEncoding {
     /// `foxglove.CompressedImage`, PNG ([`png_gray`]: Average filter,
     /// Huffman-only deflate): under half the disk of raw on camera frames.
     Png,
+    /// `foxglove.CompressedImage`, JPEG at `jpeg_quality`: lossy, every frame.
+    Jpeg,
+    /// PNG full frames every `full_frame_every`-th frame, and on every frame
+    /// a PNG crop around the drogue on `/camera/crop` ([`crop`]).
+    Crop,
+}
+
+impl ImageEncoding {
+    /// The schema of `/camera/image`.
+    pub fn is_compressed(self) -> bool {
+        self != ImageEncoding::Raw
+    }
 }
 
 /// Chunk compression of the MCAP file (the `mcap` crate's own codecs; every
@@ -89,6 +108,19 @@ pub struct LogConfig {
     /// File name prefix: `<prefix>_<UTC start>_<part>.mcap`.
     pub file_prefix: String,
     pub image_encoding: ImageEncoding,
+    /// JPEG quality of `image_encoding = "jpeg"` (1..=100).
+    pub jpeg_quality: u8,
+    /// `image_encoding = "crop"`: a full frame on `/camera/image` every this
+    /// many frames (by sequence number).
+    pub full_frame_every: u32,
+    /// `image_encoding = "crop"`: the crop's half-size over the canopy's
+    /// projected radius (1 = just the canopy).
+    pub crop_margin: f64,
+    /// `[drogue] canopy_radius_m / inner_radius_m`, set by the caller with
+    /// [`LogConfig::set_drogue`]: the crop mode scales the inner circle's
+    /// ellipse by it to cover the canopy. Not a config key.
+    #[serde(skip)]
+    pub canopy_ratio: Option<f64>,
     /// Chunk compression.
     pub compression: ChunkCompression,
     /// Compression level (zstd 1..=19, lz4 0..=12; 0 is the codec's default).
@@ -113,9 +145,39 @@ pub struct LogConfig {
 }
 
 impl LogConfig {
+    /// Tells the crop mode the drogue's size (`[drogue]`, metres).
+    pub fn set_drogue(&mut self, inner_radius_m: f64, canopy_radius_m: f64) {
+        self.canopy_ratio = Some(canopy_radius_m / inner_radius_m);
+    }
+
     /// Checks the values a writer relies on.
     pub fn validate(&self) -> Result<(), LogError> {
         let bad = |m: String| Err(LogError::Config(m));
+        if !(1..=100).contains(&self.jpeg_quality) {
+            return bad(format!(
+                "log.jpeg_quality must be 1..=100, got {}",
+                self.jpeg_quality
+            ));
+        }
+        if self.full_frame_every == 0 {
+            return bad("log.full_frame_every must be at least 1".into());
+        }
+        if !(1.0..=4.0).contains(&self.crop_margin) {
+            return bad(format!(
+                "log.crop_margin must be 1..=4, got {}",
+                self.crop_margin
+            ));
+        }
+        if self.image_encoding == ImageEncoding::Crop
+            && !self
+                .canopy_ratio
+                .is_some_and(|r| r.is_finite() && (1.0..=100.0).contains(&r))
+        {
+            return bad(format!(
+                "image_encoding = \"crop\" needs the drogue's size (LogConfig::set_drogue), got a canopy/inner ratio of {:?}",
+                self.canopy_ratio
+            ));
+        }
         if self.queue_len == 0 {
             return bad("log.queue_len must be at least 1".into());
         }
@@ -232,6 +294,8 @@ pub struct LogSummary {
     pub messages: u64,
     /// Frames written to `/camera/image`.
     pub frames: u64,
+    /// Crops written to `/camera/crop` (`image_encoding = "crop"`).
+    pub crops: u64,
     /// Items dropped because the queue was full (the writer fell behind).
     pub dropped_queue_full: u64,
     /// Items lost because no file could be written (write errors, disk full).

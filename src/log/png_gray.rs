@@ -399,4 +399,24 @@ mod tests {
         let e = GrayPngEncoder::default().encode(&[], 0, 0, &mut out);
         assert!(e.is_err());
     }
+
+    /// PNG readers may skip the zlib checksum (the `png` crate does), so it
+    /// is checked on its own: RFC 1950's Adler-32 of "Wikipedia" (the
+    /// worked example of its Wikipedia article) and of nothing.
+    #[test]
+    fn adler32_is_zlibs() {
+        assert_eq!(adler32(b"Wikipedia"), 0x11E6_0398);
+        assert_eq!(adler32(b""), 1);
+        direct_sums_check(&[0xff; 70_000]);
+    }
+
+    /// A long run of 0xff bytes, against the sums computed directly.
+    fn direct_sums_check(data: &[u8]) {
+        let (mut a, mut b) = (1u64, 0u64);
+        for &x in data {
+            a = (a + u64::from(x)) % 65_521;
+            b = (b + a) % 65_521;
+        }
+        assert_eq!(adler32(data), ((b << 16) | a) as u32);
+    }
 }

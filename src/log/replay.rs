@@ -67,14 +67,19 @@ impl ReplayReader {
             Some("foxglove.CompressedImage") => {
                 let c = CompressedImage::decode(m.data.as_ref())
                     .map_err(|e| format!("CompressedImage: {e}"))?;
-                if c.format != "png" {
-                    return Err(format!(
-                        "CompressedImage format {:?}: replay reads lossless png only",
-                        c.format
-                    ));
-                }
-                crate::image_io::decode_gray8(&c.data, Some(image::ImageFormat::Png), None)
-                    .map_err(|e| format!("PNG: {e}"))?
+                // JPEG (the lossy long-flight mode) replays too, to
+                // slightly different detections (README, "Size").
+                let format = match c.format.as_str() {
+                    "png" => image::ImageFormat::Png,
+                    "jpeg" | "jpg" => image::ImageFormat::Jpeg,
+                    other => {
+                        return Err(format!(
+                            "CompressedImage format {other:?}: replay reads png and jpeg"
+                        ));
+                    }
+                };
+                crate::image_io::decode_gray8(&c.data, Some(format), None)
+                    .map_err(|e| format!("{}: {e}", c.format))?
             }
             other => return Err(format!("{}: schema {other:?}", topics::IMAGE)),
         };

@@ -2,10 +2,13 @@
 //! syncs at least every `sync_interval_ms`, rotates by size and duration, and
 //! survives write errors (reported, counted, retried with a new file).
 
+use super::crop::{self, Crop, Cropper};
 use super::send_stamps::{ReadyRecord, SendStamps, stamp};
 use super::storage::{self, Storage, StorageFile};
 use super::topics::{self, ChannelSpec};
-use super::{Counters, Item, LogConfig, LogError, LogEvent, LogSummary, MeasurementItem};
+use super::{
+    Counters, ImageEncoding, Item, LogConfig, LogError, LogEvent, LogSummary, MeasurementItem,
+};
 use crate::camera::CameraModel;
 use crate::frame::Frame;
 use crate::link::LinkEvent;
@@ -71,6 +74,8 @@ pub(crate) struct Writer {
     metadata: Vec<mcap::records::Metadata>,
     /// PNG encoder buffers, reused frame to frame.
     png: super::png_gray::GrayPngEncoder,
+    /// `image_encoding = "crop"`: frames waiting for their crop.
+    cropper: Option<Cropper>,
 }
 
 impl Writer {
@@ -83,7 +88,13 @@ impl Writer {
         counters: Arc<Counters>,
         recovered: Vec<PathBuf>,
     ) -> Self {
+        let cropper = (cfg.image_encoding == ImageEncoding::Crop).then(|| {
+            // validate() has checked the ratio is there.
+            let scale = cfg.canopy_ratio.unwrap_or(1.0) * cfg.crop_margin;
+            Cropper::new(scale, camera.clone())
+        });
         Self {
+            cropper,
             cfg,
             dir,
             base,
@@ -201,6 +212,7 @@ impl Writer {
             self.write_detections(expired);
             match item {
                 Some(Item::Finish(reply)) => {
+                    self.drain_crops();
                     let held = self.send_stamps.drain();
                     self.write_detections(held);
                     self.close();
@@ -221,6 +233,7 @@ impl Writer {
             }
         }
         // Every handle is gone without finish(): still close the file cleanly.
+        self.drain_crops();
         let held = self.send_stamps.drain();
         self.write_detections(held);
         self.close();
@@ -239,16 +252,32 @@ impl Writer {
         }
     }
 
-    fn frame(&mut self, frame: &Frame) {
+    fn frame(&mut self, frame: &Arc<Frame>) {
         let t = frame.capture_time_ns;
         let seq = frame.seq;
         let mut buf = std::mem::take(&mut self.buf);
-        match topics::image(frame, self.cfg.image_encoding, &mut self.png, &mut buf) {
-            Ok(()) => {
+        // The crop mode keeps only every full_frame_every-th full frame.
+        let full =
+            self.cropper.is_none() || seq.is_multiple_of(u64::from(self.cfg.full_frame_every));
+        let encoded = if full {
+            topics::image(
+                frame,
+                self.cfg.image_encoding,
+                self.cfg.jpeg_quality,
+                &mut self.png,
+                &mut buf,
+            )
+            .map(Some)
+        } else {
+            Ok(None)
+        };
+        match encoded {
+            Ok(Some(())) => {
                 if self.write(topics::IMAGE, seq, t, t, &buf) {
                     self.summary.frames += 1;
                 }
             }
+            Ok(None) => {}
             Err(e) => self.report(Level::Error, format!("frame {seq}: {e}")),
         }
         let cal = topics::calibration(&self.camera, t);
@@ -257,11 +286,64 @@ impl Writer {
             self.write_json(topics::SIM_TRUTH, seq, t, t, truth, &mut buf);
         }
         self.buf = buf;
+        if let Some(cropper) = self.cropper.as_mut() {
+            let crops = cropper.frame(Arc::clone(frame));
+            self.write_crops(crops);
+        }
+    }
+
+    /// `/camera/crop` (PNG) and `/camera/crop_info` of each crop.
+    fn write_crops(&mut self, crops: Vec<Crop>) {
+        let mut pixels = Vec::new();
+        for c in crops {
+            let (seq, t) = (c.frame.seq, c.frame.capture_time_ns);
+            crop::crop_pixels(&c.frame, &c.rect, &mut pixels);
+            let mut data = Vec::new();
+            let mut buf = std::mem::take(&mut self.buf);
+            let encoded = self
+                .png
+                .encode(&pixels, c.rect.width, c.rect.height, &mut data)
+                .and_then(|()| topics::compressed(t, data, "png", &mut buf));
+            match encoded {
+                Ok(()) => {
+                    if self.write(topics::CROP, seq, t, t, &buf) {
+                        self.summary.crops += 1;
+                    }
+                    let (width, height) = c.frame.image.dimensions();
+                    let info = serde_json::json!({
+                        "seq": seq,
+                        "x": c.rect.x,
+                        "y": c.rect.y,
+                        "width": c.rect.width,
+                        "height": c.rect.height,
+                        "image_width": width,
+                        "image_height": height,
+                        "around": c.basis,
+                    });
+                    self.write_json(topics::CROP_INFO, seq, t, t, &info, &mut buf);
+                }
+                Err(e) => self.report(Level::Error, format!("crop of frame {seq}: {e}")),
+            }
+            self.buf = buf;
+        }
+    }
+
+    /// Crops of the frames still waiting (at the end).
+    fn drain_crops(&mut self) {
+        if let Some(cropper) = self.cropper.as_mut() {
+            let crops = cropper.drain();
+            self.write_crops(crops);
+        }
     }
 
     fn measurement(&mut self, item: MeasurementItem) {
         let m = &item.measurement;
         let (seq, t) = (m.seq, m.capture_time_ns);
+        if let Some(cropper) = self.cropper.as_mut() {
+            let ellipse = m.detection.as_ref().map(|d| &d.ellipse_px);
+            let crops = cropper.measurement(seq, t, ellipse);
+            self.write_crops(crops);
+        }
         let mut buf = std::mem::take(&mut self.buf);
         let ann = topics::annotations(m, &self.camera);
         self.write_proto(topics::ANNOTATIONS, seq, t, &ann, &mut buf);

@@ -11,7 +11,10 @@
 Every message of every topic is decoded: protobuf ones with their embedded
 schema (which must be a foxglove.* schema), JSON ones with json; PNG frames
 are inflated with Python's own zlib (chunk CRCs checked, size and filter
-bytes of every row). A complete log
+bytes of every row), JPEG frames (`image_encoding = "jpeg"`) decoded with
+Pillow to an 8-bit gray image of the calibration's size, and the crop mode's
+`/camera/crop` PNGs checked against `/camera/crop_info` (same size, inside
+the frame). A complete log
 must open through its summary/index and its message counts must match the
 summary's statistics. A --cut log is streamed up to the cut. Exit status 0 only
 if every check passed.
@@ -46,7 +49,11 @@ class Checker:
         self.path = path
         self.failures = []
         self.counts = {}
-        self.last_frame_time = None
+        self.last_frame_time = {}
+        self.image_size = None
+        # seq -> (width, height) of /camera/crop and of /camera/crop_info.
+        self.crop_sizes = {}
+        self.crop_infos = {}
         self.decoders = {}
         self.factory = DecoderFactory()
 
@@ -86,6 +93,12 @@ class Checker:
                 self.fail(f"{topic}: JSON message is not an object")
             if topic == "/drogue/detection" and "detected" not in obj:
                 self.fail(f"{topic}: no 'detected' field")
+            if topic == "/camera/crop_info":
+                x, y, w, h = (obj.get(k, -1) for k in ("x", "y", "width", "height"))
+                iw, ih = obj.get("image_width", 0), obj.get("image_height", 0)
+                if min(x, y) < 0 or min(w, h) < 1 or x + w > iw or y + h > ih:
+                    self.fail(f"{topic}: crop {x},{y} {w}x{h} not inside {iw}x{ih}")
+                self.crop_infos[message.sequence] = (w, h)
         else:
             self.fail(f"{topic}: unexpected message encoding {channel.message_encoding}")
 
@@ -95,16 +108,25 @@ class Checker:
                 self.fail(f"{topic}: bad RawImage {obj.width}x{obj.height} {obj.encoding}")
             self.frame_order(topic, message)
         elif name == "foxglove.CompressedImage":
-            if obj.format != "png" or not obj.data.startswith(PNG_SIGNATURE):
+            if obj.format == "jpeg" and topic == "/camera/image":
+                problem, size = check_jpeg(bytes(obj.data))
+                if problem:
+                    self.fail(f"{topic}: JPEG: {problem}")
+                elif self.image_size is not None and size != self.image_size:
+                    self.fail(f"{topic}: JPEG {size}, calibration {self.image_size}")
+            elif obj.format != "png" or not obj.data.startswith(PNG_SIGNATURE):
                 self.fail(f"{topic}: CompressedImage is not PNG ({obj.format})")
             else:
-                problem = check_png(bytes(obj.data))
+                problem, size = check_png(bytes(obj.data))
                 if problem:
                     self.fail(f"{topic}: PNG: {problem}")
+                elif topic == "/camera/crop":
+                    self.crop_sizes[message.sequence] = size
             self.frame_order(topic, message)
         elif name == "foxglove.CameraCalibration":
             if len(obj.K) != 9 or obj.K[0] <= 0 or obj.width < 1:
                 self.fail(f"{topic}: bad CameraCalibration K={list(obj.K)}")
+            self.image_size = (obj.width, obj.height)
         elif name == "foxglove.PoseInFrame":
             q = obj.pose.orientation
             if abs(math.sqrt(q.x**2 + q.y**2 + q.z**2 + q.w**2) - 1.0) > 1e-6:
@@ -123,14 +145,47 @@ class Checker:
                 self.fail(f"{topic}: log level {obj.level}")
 
     def frame_order(self, topic, message):
-        if self.last_frame_time is not None and message.log_time < self.last_frame_time:
+        last = self.last_frame_time.get(topic)
+        if last is not None and message.log_time < last:
             self.fail(f"{topic}: frames out of order")
-        self.last_frame_time = message.log_time
+        self.last_frame_time[topic] = message.log_time
+
+    def check_crops(self):
+        """Every /camera/crop has its /camera/crop_info, of its size."""
+        if self.crop_sizes.keys() != self.crop_infos.keys():
+            self.fail(f"{len(self.crop_sizes)} crops, {len(self.crop_infos)} crop_info records")
+        for seq, size in self.crop_sizes.items():
+            if self.crop_infos.get(seq, size) != size:
+                self.fail(f"crop {seq}: PNG {size}, crop_info {self.crop_infos[seq]}")
+
+
+def check_jpeg(data):
+    """Decodes a JPEG with Pillow: (what is wrong or None, (width, height))."""
+    import io
+
+    from PIL import Image
+
+    try:
+        with Image.open(io.BytesIO(data)) as im:
+            if im.format != "JPEG" or im.mode != "L":
+                return f"{im.format} {im.mode}, not an 8-bit gray JPEG", None
+            im.load()
+            return None, im.size
+    except Exception as e:  # noqa: BLE001 - any decode failure is a failure
+        return f"Pillow: {e}", None
 
 
 def check_png(data):
     """Inflates a gray PNG with zlib: chunk CRCs, row count and length, filter
-    bytes. Returns what is wrong, or None."""
+    bytes. Returns (what is wrong or None, (width, height))."""
+    problem = png_problem(data)
+    if problem:
+        return problem, None
+    width, height = struct.unpack(">II", data[16:24])
+    return None, (width, height)
+
+
+def png_problem(data):
     pos, idat, ihdr = len(PNG_SIGNATURE), [], None
     while pos + 8 <= len(data):
         (length,) = struct.unpack(">I", data[pos:pos + 4])
@@ -219,6 +274,7 @@ def check_cut(path, required):
 
 
 def finish(c, required):
+    c.check_crops()
     for topic in required:
         if c.counts.get(topic, 0) == 0:
             c.fail(f"no messages on {topic}")

@@ -136,8 +136,11 @@ pub struct ReviewReport {
     pub first_frame_ns: Option<u64>,
     pub last_frame_ns: Option<u64>,
     pub frames: u64,
-    /// Frames missing from `/camera/image` (gaps in the sequence numbers).
+    /// Frames missing from `/camera/image` (gaps in the sequence numbers,
+    /// counting only the frames the log's mode keeps).
     pub frames_lost: u64,
+    /// `image_encoding = "crop"`: a full frame every this many (1 otherwise).
+    pub full_frame_every: u64,
     pub measurements: u64,
     pub detected: u64,
     /// Measurement time per frame, ms.
@@ -279,6 +282,8 @@ fn review_into(log: &Path, out_dir: &Path) -> Result<ReviewReport, LogError> {
             && values.get("clock").map(String::as_str) == Some("source")
     });
     r.source_clock = source_clock;
+    r.full_frame_every = full_frame_every(&r.metadata);
+    let every = u32::try_from(r.full_frame_every).unwrap_or(1).max(1);
     let mut last_frame_seq: Option<u32> = None;
     let mut last_heartbeat: Option<u64> = None;
     let mut last_sent_capture: Option<u64> = None;
@@ -315,7 +320,8 @@ fn review_into(log: &Path, out_dir: &Path) -> Result<ReviewReport, LogError> {
                 if let Some(prev) = last_frame_seq
                     && m.sequence > prev
                 {
-                    r.frames_lost += u64::from(m.sequence - prev - 1);
+                    // Full frames kept between the two, but not logged.
+                    r.frames_lost += u64::from((m.sequence - 1) / every - prev / every);
                 }
                 last_frame_seq = Some(m.sequence);
             }
@@ -505,6 +511,30 @@ fn review_into(log: &Path, out_dir: &Path) -> Result<ReviewReport, LogError> {
     Ok(r)
 }
 
+/// `[log] full_frame_every` of a crop-mode log, from its run metadata's
+/// config (1 for every other log, also without metadata).
+fn full_frame_every(metadata: &[(String, BTreeMap<String, String>)]) -> u64 {
+    let config = metadata
+        .iter()
+        .find(|(name, _)| name == super::metadata::RUN_METADATA)
+        .and_then(|(_, values)| values.get("config_toml"))
+        .and_then(|text| toml::from_str::<toml::Table>(text).ok());
+    let log = config.as_ref().and_then(|c| c.get("log"));
+    let crop = log
+        .and_then(|l| l.get("image_encoding"))
+        .and_then(|v| v.as_str())
+        == Some("crop");
+    let every = log
+        .and_then(|l| l.get("full_frame_every"))
+        .and_then(|v| v.as_integer())
+        .and_then(|n| u64::try_from(n).ok())
+        .filter(|&n| n >= 1);
+    match (crop, every) {
+        (true, Some(n)) => n,
+        _ => 1,
+    }
+}
+
 impl ReviewReport {
     /// First to last frame (all messages when the log has no frames), s.
     pub fn duration_s(&self) -> f64 {
@@ -568,9 +598,17 @@ impl fmt::Display for ReviewReport {
             }
         }
         writeln!(f, "duration   {:.1} s", self.duration_s())?;
+        let mode = if self.full_frame_every > 1 {
+            format!(
+                " (crop mode: full frames every {}th, crops on /camera/crop)",
+                self.full_frame_every
+            )
+        } else {
+            String::new()
+        };
         writeln!(
             f,
-            "frames     {} logged, {} lost or dropped before the log (sequence gaps), {} dropped by the log writer",
+            "frames     {} logged{mode}, {} lost or dropped before the log (sequence gaps), {} dropped by the log writer",
             self.frames, self.frames_lost, self.log_dropped
         )?;
         writeln!(
