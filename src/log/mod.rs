@@ -12,6 +12,7 @@
 
 mod layer;
 pub mod metadata;
+pub mod oversized;
 pub mod png_gray;
 pub mod recover;
 pub mod replay;
