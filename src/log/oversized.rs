@@ -17,6 +17,13 @@
 //! would mean decompressing it. The footer's end magic and anything after
 //! it go through unchanged.
 //!
+//! Inside an uncompressed chunk it also checks that each record ends within
+//! the chunk's records, and ends the reading with an error where one does
+//! not: the `mcap` crate's reader (0.26) subtracts such a length from its
+//! count of the chunk's bytes without a check (found by the `mcap_reader`
+//! fuzz target: an overflow panic where overflow is checked, and otherwise
+//! the bytes after the chunk read as records of it).
+//!
 //! Skipping changes the bytes the data-section CRC covers, so readers fed
 //! through this must leave that check off (the `mcap` default; chunk CRCs
 //! are still checked).
@@ -45,17 +52,29 @@ impl Oversized {
     }
 }
 
+/// What follows a run of bytes passed through.
+#[derive(Clone, Copy, Debug)]
+enum After {
+    /// The next top-level record head.
+    Head,
+    /// The next record inside an uncompressed chunk: `records` bytes of
+    /// the chunk's records left, then `tail` bytes to the chunk's end.
+    Inner { records: u64, tail: u64 },
+}
+
 /// Where the walk over the file is.
 #[derive(Clone, Copy, Debug)]
 enum State {
-    /// The file's start magic: this many bytes still to pass through.
-    Magic(usize),
+    /// The file's start magic.
+    Magic,
     /// At a record head.
     Head,
-    /// Passing through the current record: head bytes `head[at..]`, then
-    /// `body` more bytes.
-    Record { at: usize, body: u64 },
-    /// After the footer, or a head that did not parse: all the rest as is.
+    /// At the header of a chunk record of `body` bytes (its head read).
+    ChunkHeader { body: u64 },
+    /// Passing `left` bytes through, then `then`.
+    Pass { left: u64, then: After },
+    /// After the footer, a cut or a length the reader is to report: all
+    /// the rest as it is.
     Rest,
 }
 
@@ -63,11 +82,12 @@ enum State {
 /// [`RECORD_LIMIT_BYTES`] (see the module docs).
 pub struct SkipOversized<R> {
     inner: R,
-    /// Bytes of the file after the current position.
+    /// Bytes of the file after the position of `inner`.
     remaining: u64,
     state: State,
-    head: [u8; 9],
-    head_len: usize,
+    /// Bytes read ahead (record heads, chunk headers), to hand out first.
+    pending: Vec<u8>,
+    pending_at: usize,
     skipped: Arc<Oversized>,
 }
 
@@ -77,9 +97,9 @@ impl<R: Read + Seek> SkipOversized<R> {
         Self {
             inner,
             remaining: len,
-            state: State::Magic(mcap::MAGIC.len()),
-            head: [0; 9],
-            head_len: 0,
+            state: State::Magic,
+            pending: Vec::with_capacity(64),
+            pending_at: 0,
             skipped: Arc::default(),
         }
     }
@@ -89,50 +109,148 @@ impl<R: Read + Seek> SkipOversized<R> {
         Arc::clone(&self.skipped)
     }
 
-    /// Reads the next record head; skips records above the bound. Leaves
-    /// the state at the record to pass through (or the rest of the file).
-    fn next_head(&mut self) -> io::Result<()> {
-        loop {
-            let got = read_up_to(&mut self.inner, &mut self.head)?;
-            self.remaining = self.remaining.saturating_sub(got as u64);
-            self.head_len = got;
-            if got < self.head.len() {
-                // The end, or a head cut short: the reader says which.
-                self.state = State::Record { at: 0, body: 0 };
-                return Ok(());
+    /// Reads up to `n` bytes onto the end of `pending`; returns how many.
+    fn read_ahead(&mut self, n: usize) -> io::Result<usize> {
+        let from = self.pending.len();
+        self.pending.resize(from + n, 0);
+        let got = read_up_to(&mut self.inner, &mut self.pending[from..])?;
+        self.pending.truncate(from + got);
+        self.remaining = self.remaining.saturating_sub(got as u64);
+        Ok(got)
+    }
+
+    /// Moves the walk on by one step, reading ahead into `pending` what is
+    /// to be handed out next.
+    fn step(&mut self) -> io::Result<()> {
+        self.pending.clear();
+        self.pending_at = 0;
+        match self.state {
+            State::Magic => {
+                self.read_ahead(mcap::MAGIC.len())?;
+                self.state = State::Head;
             }
-            let opcode = self.head[0];
-            let len = u64::from_le_bytes([
-                self.head[1],
-                self.head[2],
-                self.head[3],
-                self.head[4],
-                self.head[5],
-                self.head[6],
-                self.head[7],
-                self.head[8],
-            ]);
-            if len > RECORD_LIMIT_BYTES as u64 && opcode != op::CHUNK && len <= self.remaining {
-                let skip = i64::try_from(len).map_err(io::Error::other)?;
-                self.inner.seek(SeekFrom::Current(skip))?;
-                self.remaining -= len;
-                self.skipped.records.fetch_add(1, Ordering::Relaxed);
-                self.skipped.bytes.fetch_add(len, Ordering::Relaxed);
-                continue;
-            }
-            self.state = if opcode == op::FOOTER || len > self.remaining {
-                // The end magic follows the footer; a length past the end is
-                // the reader's to report.
-                State::Record {
-                    at: 0,
-                    body: u64::MAX,
+            State::Head => loop {
+                if self.read_ahead(9)? < 9 {
+                    // The end, or a head cut short: the reader says which.
+                    self.state = State::Rest;
+                    return Ok(());
                 }
-            } else {
-                State::Record { at: 0, body: len }
+                let opcode = self.pending[0];
+                let len = u64_at(&self.pending, 1);
+                if len > RECORD_LIMIT_BYTES as u64 && opcode != op::CHUNK && len <= self.remaining {
+                    let skip = i64::try_from(len).map_err(io::Error::other)?;
+                    self.inner.seek(SeekFrom::Current(skip))?;
+                    self.remaining -= len;
+                    self.skipped.records.fetch_add(1, Ordering::Relaxed);
+                    self.skipped.bytes.fetch_add(len, Ordering::Relaxed);
+                    self.pending.clear();
+                    continue;
+                }
+                self.state = if opcode == op::FOOTER || len > self.remaining {
+                    // The end magic follows the footer; a length past the
+                    // end is the reader's to report.
+                    State::Rest
+                } else if opcode == op::CHUNK {
+                    State::ChunkHeader { body: len }
+                } else {
+                    State::Pass {
+                        left: len,
+                        then: After::Head,
+                    }
+                };
+                return Ok(());
+            },
+            State::ChunkHeader { body } => {
+                // start, end, uncompressed size, CRC, compression name
+                // length; for an uncompressed chunk (empty name) then the
+                // size of its records.
+                const FIXED: u64 = 8 + 8 + 8 + 4 + 4;
+                if body < FIXED + 8 {
+                    self.state = State::Rest;
+                    return Ok(());
+                }
+                if self.read_ahead(FIXED as usize)? < FIXED as usize {
+                    self.state = State::Rest;
+                    return Ok(());
+                }
+                let name_len = u32::from_le_bytes([
+                    self.pending[28],
+                    self.pending[29],
+                    self.pending[30],
+                    self.pending[31],
+                ]);
+                if name_len != 0 {
+                    self.state = State::Pass {
+                        left: body - FIXED,
+                        then: After::Head,
+                    };
+                    return Ok(());
+                }
+                if self.read_ahead(8)? < 8 {
+                    self.state = State::Rest;
+                    return Ok(());
+                }
+                let records = u64_at(&self.pending, FIXED as usize);
+                let data = body - FIXED - 8;
+                self.state = match data.checked_sub(records) {
+                    Some(tail) => State::Pass {
+                        left: 0,
+                        then: After::Inner { records, tail },
+                    },
+                    // The reader refuses a size past the chunk's end.
+                    None => State::Pass {
+                        left: data,
+                        then: After::Head,
+                    },
+                };
+            }
+            State::Pass { .. } | State::Rest => {}
+        }
+        Ok(())
+    }
+
+    /// The next record inside an uncompressed chunk: its head is read ahead
+    /// and must leave the record within the chunk's records. (The `mcap`
+    /// crate's reader does not check this: its count of the chunk's bytes
+    /// left would wrap around, and it would read what follows the chunk as
+    /// records of the chunk.)
+    fn inner_head(&mut self, records: u64, tail: u64) -> io::Result<()> {
+        self.pending.clear();
+        self.pending_at = 0;
+        if records == 0 {
+            self.state = State::Pass {
+                left: tail,
+                then: After::Head,
             };
             return Ok(());
         }
+        let fits = records >= 9 && self.read_ahead(9)? == 9 && {
+            let len = u64_at(&self.pending, 1);
+            len <= records - 9
+        };
+        if !fits {
+            return Err(io::Error::new(
+                io::ErrorKind::InvalidData,
+                "a record inside a chunk runs past the end of the chunk's records",
+            ));
+        }
+        let len = u64_at(&self.pending, 1);
+        self.state = State::Pass {
+            left: len,
+            then: After::Inner {
+                records: records - 9 - len,
+                tail,
+            },
+        };
+        Ok(())
     }
+}
+
+/// The little-endian u64 at `at` (the caller has checked the length).
+fn u64_at(b: &[u8], at: usize) -> u64 {
+    let mut x = [0u8; 8];
+    x.copy_from_slice(&b[at..at + 8]);
+    u64::from_le_bytes(x)
 }
 
 impl<R: Read + Seek> Read for SkipOversized<R> {
@@ -141,44 +259,27 @@ impl<R: Read + Seek> Read for SkipOversized<R> {
             return Ok(0);
         }
         loop {
+            if self.pending_at < self.pending.len() {
+                let n = (self.pending.len() - self.pending_at).min(buf.len());
+                buf[..n].copy_from_slice(&self.pending[self.pending_at..self.pending_at + n]);
+                self.pending_at += n;
+                return Ok(n);
+            }
             match self.state {
-                State::Magic(0) => self.state = State::Head,
-                State::Magic(left) => {
-                    let n = left.min(buf.len());
+                State::Pass { left: 0, then } => match then {
+                    After::Head => {
+                        self.state = State::Head;
+                        self.step()?;
+                    }
+                    After::Inner { records, tail } => self.inner_head(records, tail)?,
+                },
+                State::Pass { left, then } => {
+                    let n = usize::try_from(left).unwrap_or(usize::MAX).min(buf.len());
                     let got = self.inner.read(&mut buf[..n])?;
                     self.remaining = self.remaining.saturating_sub(got as u64);
-                    self.state = if got == 0 {
-                        State::Rest
-                    } else {
-                        State::Magic(left - got)
-                    };
-                    return Ok(got);
-                }
-                State::Head => self.next_head()?,
-                State::Record { at, body } if at < self.head_len => {
-                    let n = (self.head_len - at).min(buf.len());
-                    buf[..n].copy_from_slice(&self.head[at..at + n]);
-                    self.state = State::Record { at: at + n, body };
-                    return Ok(n);
-                }
-                State::Record { body: u64::MAX, .. } => self.state = State::Rest,
-                State::Record { body: 0, .. } => {
-                    if self.head_len < self.head.len() {
-                        // The file ended in (or at) a head.
-                        return Ok(0);
-                    }
-                    self.state = State::Head;
-                }
-                State::Record { at, body } => {
-                    let n = usize::try_from(body).unwrap_or(usize::MAX).min(buf.len());
-                    let got = self.inner.read(&mut buf[..n])?;
-                    self.remaining = self.remaining.saturating_sub(got as u64);
-                    if got == 0 {
-                        return Ok(0);
-                    }
-                    self.state = State::Record {
-                        at,
-                        body: body - got as u64,
+                    self.state = State::Pass {
+                        left: left - got as u64,
+                        then,
                     };
                     return Ok(got);
                 }
@@ -187,6 +288,8 @@ impl<R: Read + Seek> Read for SkipOversized<R> {
                     self.remaining = self.remaining.saturating_sub(got as u64);
                     return Ok(got);
                 }
+                // Each step leaves these states.
+                State::Magic | State::Head | State::ChunkHeader { .. } => self.step()?,
             }
         }
     }
@@ -260,6 +363,52 @@ mod tests {
         file.extend(&tail);
         want.extend(&tail);
         assert_eq!(filtered(&file), (want, 1));
+    }
+
+    /// An uncompressed chunk holding `inner` as its records.
+    fn plain_chunk(inner: &[u8]) -> Vec<u8> {
+        let mut body = Vec::new();
+        body.extend_from_slice(&[0u8; 24]); // start, end, uncompressed size
+        body.extend_from_slice(&0u32.to_le_bytes()); // CRC (none)
+        body.extend_from_slice(&0u32.to_le_bytes()); // compression ""
+        body.extend_from_slice(&(inner.len() as u64).to_le_bytes());
+        body.extend_from_slice(inner);
+        record(op::CHUNK, &body)
+    }
+
+    #[test]
+    fn records_inside_an_uncompressed_chunk_pass_when_they_fit() {
+        let mut file = mcap::MAGIC.to_vec();
+        let mut inner = record(op::SCHEMA, &[1; 10]);
+        inner.extend(record(op::MESSAGE, &[2; 3]));
+        file.extend(plain_chunk(&inner));
+        file.extend(record(op::MESSAGE, &[3; 4]));
+        assert_eq!(filtered(&file), (file.clone(), 0));
+    }
+
+    /// The shape of the `mcap_reader` fuzz target's first crash: a record
+    /// inside an uncompressed chunk longer than the chunk's records.
+    #[test]
+    fn a_record_running_past_its_chunk_is_an_error() {
+        for inner in [record(op::MESSAGE, &[2; 40])[..20].to_vec(), vec![5u8; 4]] {
+            let mut file = mcap::MAGIC.to_vec();
+            file.extend(plain_chunk(&inner));
+            file.extend(record(op::MESSAGE, &[3; 64]));
+            let mut f = SkipOversized::new(Cursor::new(file.clone()), file.len() as u64);
+            let mut out = Vec::new();
+            let e = f.read_to_end(&mut out).unwrap_err();
+            assert_eq!(e.kind(), io::ErrorKind::InvalidData);
+        }
+        // Through the crate's reader: an error, not a panic or a message.
+        let mut file = mcap::MAGIC.to_vec();
+        file.extend(record(op::HEADER, &[0; 8]));
+        file.extend(plain_chunk(&record(op::MESSAGE, &[2; 40])[..20]));
+        file.extend(record(op::MESSAGE, &[3; 64]));
+        let source = SkipOversized::new(Cursor::new(file.clone()), file.len() as u64);
+        let opts = super::super::recover::reader_options();
+        let got: Vec<_> = mcap::io::MessageReader::new_with_options(source, opts).collect();
+        assert_eq!(got.len(), 1);
+        assert!(got[0].is_err());
     }
 
     #[test]

@@ -91,7 +91,8 @@ impl ReplayReader {
     /// from the start again; streams until it finds it).
     pub fn first_camera(path: &Path) -> Result<CameraModel, LogError> {
         for message in message_reader(path)? {
-            let m = message.map_err(|e| LogError::format(path, e))?;
+            let m = message
+                .map_err(|e| LogError::format(path, super::recover::describe_read_error(&e)))?;
             if m.channel.topic == topics::CALIBRATION {
                 let cal = CameraCalibration::decode(m.data.as_ref())
                     .map_err(|e| LogError::format(path, format!("/camera/calibration: {e}")))?;
@@ -173,7 +174,10 @@ impl Iterator for ReplayReader {
                 Ok(m) => m,
                 Err(e) => {
                     self.finish();
-                    return Some(Err(LogError::format(&self.path, e)));
+                    return Some(Err(LogError::format(
+                        &self.path,
+                        super::recover::describe_read_error(&e),
+                    )));
                 }
             };
             match m.channel.topic.as_str() {
