@@ -27,7 +27,9 @@ fn mcap_a_record_running_past_its_chunk_is_an_error() {
     let input = seed("mcap_reader", "chunk_record_past_end.mcap");
     let items: Vec<_> = replay::open(&input).unwrap().collect();
     let last = items.last().expect("an error at least");
-    let e = last.as_ref().err().expect("the reading ends with an error");
+    let Err(e) = last else {
+        panic!("the reading ends with an error");
+    };
     assert!(
         e.to_string()
             .contains("runs past the end of the chunk's records"),
