@@ -146,12 +146,14 @@ impl<R: Read + Seek> SkipOversized<R> {
                     self.pending.clear();
                     continue;
                 }
-                self.state = if opcode == op::FOOTER || len > self.remaining {
+                self.state = if opcode == op::CHUNK {
+                    // Also when its length runs past the end: the reader
+                    // streams a chunk, and reads its records up to the cut.
+                    State::ChunkHeader { body: len }
+                } else if opcode == op::FOOTER || len > self.remaining {
                     // The end magic follows the footer; a length past the
                     // end is the reader's to report.
                     State::Rest
-                } else if opcode == op::CHUNK {
-                    State::ChunkHeader { body: len }
                 } else {
                     State::Pass {
                         left: len,
@@ -224,17 +226,25 @@ impl<R: Read + Seek> SkipOversized<R> {
             };
             return Ok(());
         }
-        let fits = records >= 9 && self.read_ahead(9)? == 9 && {
-            let len = u64_at(&self.pending, 1);
-            len <= records - 9
-        };
-        if !fits {
-            return Err(io::Error::new(
+        let past_end = || {
+            io::Error::new(
                 io::ErrorKind::InvalidData,
                 "a record inside a chunk runs past the end of the chunk's records",
+            )
+        };
+        if records < 9 {
+            return Err(past_end());
+        }
+        if self.read_ahead(9)? < 9 {
+            return Err(io::Error::new(
+                io::ErrorKind::UnexpectedEof,
+                "the file ends inside a chunk",
             ));
         }
         let len = u64_at(&self.pending, 1);
+        if len > records - 9 {
+            return Err(past_end());
+        }
         self.state = State::Pass {
             left: len,
             then: After::Inner {
@@ -399,6 +409,14 @@ mod tests {
             let e = f.read_to_end(&mut out).unwrap_err();
             assert_eq!(e.kind(), io::ErrorKind::InvalidData);
         }
+        // The same in a chunk whose own length runs past the end of the file.
+        let mut file = mcap::MAGIC.to_vec();
+        let mut chunk = plain_chunk(&record(op::MESSAGE, &[2; 40])[..20]);
+        chunk[1..9].copy_from_slice(&1000u64.to_le_bytes());
+        file.extend(chunk);
+        let mut f = SkipOversized::new(Cursor::new(file.clone()), file.len() as u64);
+        let e = f.read_to_end(&mut Vec::new()).unwrap_err();
+        assert_eq!(e.kind(), io::ErrorKind::InvalidData);
         // Through the crate's reader: an error, not a panic or a message.
         let mut file = mcap::MAGIC.to_vec();
         file.extend(record(op::HEADER, &[0; 8]));
