@@ -372,6 +372,140 @@ fn image_bombs_and_a_lying_mcap_stay_under_64_mb() {
     }
 }
 
+/// A log of 64x48 raw frames with sequence numbers 1, 2, 4, 5 (and a
+/// calibration first), unchunked so each message is a top-level record; with
+/// `big` > 0, a `/camera/image` message of `big` bytes (sequence 3) between
+/// frames 2 and 4. Returns the number of messages written.
+fn log_with_a_big_record(path: &Path, big: usize) -> u64 {
+    use drogue_vision::frame::{Frame, FrameOrigin};
+    use drogue_vision::log::{ImageEncoding, png_gray::GrayPngEncoder, topics};
+    let k = nalgebra::Matrix3::new(60.0, 0.0, 32.0, 0.0, 60.0, 24.0, 0.0, 0.0, 1.0);
+    let camera = drogue_vision::camera::CameraModel::new("t", 64, 48, k, [0.0; 5]).unwrap();
+    let options = mcap::WriteOptions::new().use_chunks(false);
+    let file = std::io::BufWriter::new(std::fs::File::create(path).unwrap());
+    let mut w = mcap::Writer::with_options(file, options).unwrap();
+    let mut channel = |topic: &str| {
+        let spec = topics::channel_spec(topic, ImageEncoding::Raw).unwrap();
+        let schema = &spec.schema;
+        let s = w
+            .add_schema(&schema.name, &schema.encoding, &schema.data)
+            .unwrap();
+        w.add_channel(s, topic, spec.message_encoding, &Default::default())
+            .unwrap()
+    };
+    let (cal, img) = (channel(topics::CALIBRATION), channel(topics::IMAGE));
+    let header = |channel_id, sequence: u32| mcap::records::MessageHeader {
+        channel_id,
+        sequence,
+        log_time: u64::from(sequence) * 1_000_000,
+        publish_time: u64::from(sequence) * 1_000_000,
+    };
+    let mut buf = Vec::new();
+    topics::encode(&topics::calibration(&camera, 0), &mut buf).unwrap();
+    w.write_to_known_channel(&header(cal, 0), &buf).unwrap();
+    let mut n = 1;
+    for seq in [1u32, 2, 3, 4, 5] {
+        if seq == 3 {
+            if big > 0 {
+                w.write_to_known_channel(&header(img, 3), &vec![0u8; big])
+                    .unwrap();
+                n += 1;
+            }
+            continue;
+        }
+        let frame = Frame {
+            seq: u64::from(seq),
+            capture_time_ns: u64::from(seq) * 1_000_000,
+            image: image::GrayImage::from_pixel(64, 48, image::Luma([seq as u8 * 40])),
+            origin: FrameOrigin::File(PathBuf::new()),
+        };
+        topics::image(
+            &frame,
+            ImageEncoding::Raw,
+            &mut GrayPngEncoder::default(),
+            &mut buf,
+        )
+        .unwrap();
+        w.write_to_known_channel(&header(img, seq), &buf).unwrap();
+        n += 1;
+    }
+    w.finish().unwrap();
+    n
+}
+
+/// A record above the 32 MiB bound between good ones is skipped unread and
+/// counted: the frames before and after it are all read (replay, `process`,
+/// `recover`), and reading the log costs no more peak memory than the same
+/// log without it (far less than the record).
+#[test]
+fn an_oversized_mcap_record_is_skipped_and_counted() {
+    use drogue_vision::log::{recover, replay};
+    const BIG: usize = 48 << 20;
+    const { assert!(BIG > recover::RECORD_LIMIT_BYTES) };
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let written = log_with_a_big_record(&d.join("big.mcap"), BIG);
+    let written_small = log_with_a_big_record(&d.join("small.mcap"), 0);
+    assert_eq!((written, written_small), (6, 5));
+    assert!(std::fs::metadata(d.join("big.mcap")).unwrap().len() > BIG as u64);
+
+    // Replay: every frame but the oversized one, in order, and no error.
+    let mut reader = replay::open(&d.join("big.mcap")).unwrap();
+    let seqs: Vec<u64> = reader.by_ref().map(|f| f.unwrap().seq).collect();
+    assert_eq!(seqs, [1, 2, 4, 5]);
+    assert_eq!(reader.oversized_skipped(), 1);
+    let cam = replay::ReplayReader::first_camera(&d.join("big.mcap")).unwrap();
+    assert_eq!((cam.width, cam.height), (64, 48));
+
+    // Recover: the 5 good messages copied, the skip counted and reported.
+    let report = recover::recover(&d.join("big.mcap"), &d.join("rec.mcap")).unwrap();
+    assert_eq!(report.oversized_records, 1, "{report}");
+    assert_eq!(report.messages, 5, "{report}");
+    assert!(
+        report.to_string().contains("1 records above the 32 MiB"),
+        "{report}"
+    );
+    let seqs: Vec<u64> = replay::open(&d.join("rec.mcap"))
+        .unwrap()
+        .map(|f| f.unwrap().seq)
+        .collect();
+    assert_eq!(seqs, [1, 2, 4, 5]);
+
+    // Through the binary: the same frames, the count in the warning, and
+    // the peak memory of the log without the record, within a quarter of
+    // the record's size (reading it would cost all of it).
+    let base = run(&["process", "small.mcap", "--out", "s.jsonl"], d, SHORT);
+    assert_eq!(base.code, Some(0), "{}", base.stderr);
+    let o = run(&["process", "big.mcap", "--out", "b.jsonl"], d, SHORT);
+    assert_eq!(o.code, Some(0), "{}", o.stderr);
+    let frames: Vec<String> = records(&d.join("b.jsonl"))
+        .iter()
+        .map(|r| r["frame"].as_str().unwrap().to_string())
+        .collect();
+    assert_eq!(frames, ["1", "2", "4", "5"]);
+    // The record's body: the data and the message header (channel id 2,
+    // sequence 4, log and publish times 8 + 8 bytes, per the MCAP spec).
+    let warning = format!(
+        "1 MCAP record(s) ({} bytes) above the 32 MiB record bound skipped in all",
+        BIG + 22
+    );
+    assert!(o.stderr.contains(&warning), "{}", o.stderr);
+    let rec = run(&["recover", "big.mcap", "--out", "rec2.mcap"], d, SHORT);
+    assert_eq!(rec.code, Some(0), "{}", rec.stderr);
+    println!(
+        "oversized record: process peak {} KiB (without it {} KiB), recover peak {} KiB",
+        o.max_rss_kib, base.max_rss_kib, rec.max_rss_kib
+    );
+    let margin = (BIG / 4 / 1024) as i64;
+    assert!(
+        o.max_rss_kib < base.max_rss_kib + margin,
+        "{} KiB",
+        o.max_rss_kib
+    );
+    assert!(rec.max_rss_kib < PEAK_LIMIT_KIB, "{} KiB", rec.max_rss_kib);
+    assert!(o.max_rss_kib < PEAK_LIMIT_KIB, "{} KiB", o.max_rss_kib);
+}
+
 /// Random values for random numbers of the config, through the binary: exit
 /// 0 or 2, each within a bounded time (the in-process property tests in
 /// `config.rs` cover every key with many more values).

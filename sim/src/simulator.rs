@@ -22,7 +22,10 @@ pub struct Simulator {
     camera: SimCamera,
     r_body_cam: M3,
     world: World,
-    renderer: Renderer,
+    look: Look,
+    /// Built at the first frame rendered: its per-pixel ray table costs
+    /// milliseconds, which callers that only want the truth never pay.
+    renderer: Option<Renderer>,
     seq: u64,
     frame_count: u64,
     last_scene: Option<FrameScene>,
@@ -54,14 +57,14 @@ impl Simulator {
             vignette: scenario.camera.vignette,
             cloud_seed: (scenario.seed as u32).wrapping_mul(2_654_435_761),
         };
-        let renderer = Renderer::new(&camera, look);
         Ok(Simulator {
             world: World::new(&scenario),
             frame_count: scenario.frame_count(),
             scenario,
             camera,
             r_body_cam,
-            renderer,
+            look,
+            renderer: None,
             seq: 0,
             last_scene: None,
         })
@@ -124,7 +127,7 @@ impl Simulator {
         }
         let state = self.world.advance();
         let (scene, truth) = self.frame_scene(&state);
-        let img = self.renderer.render(&scene);
+        let img = self.renderer().render(&scene);
         self.last_scene = Some(scene);
         self.seq += 1;
         Some((img, truth))
@@ -137,7 +140,13 @@ impl Simulator {
 
     /// Renders a scene again (for benchmarks: the renderer alone).
     pub fn render_scene(&mut self, scene: &FrameScene) -> GrayImage {
-        self.renderer.render(scene)
+        self.renderer().render(scene)
+    }
+
+    fn renderer(&mut self) -> &mut Renderer {
+        let (camera, look) = (&self.camera, &self.look);
+        self.renderer
+            .get_or_insert_with(|| Renderer::new(camera, look.clone()))
     }
 
     /// Truth only (no rendering), for fast trajectory runs.

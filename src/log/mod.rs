@@ -23,6 +23,7 @@
 pub mod crop;
 mod layer;
 pub mod metadata;
+pub mod oversized;
 pub mod png_gray;
 pub mod recover;
 pub mod replay;

@@ -23,18 +23,23 @@
 //! yields.
 
 use super::LogError;
+use super::oversized::{Oversized, SkipOversized};
 use mcap::records::{self, MessageHeader, Record, op};
 use std::collections::{BTreeMap, HashMap};
 use std::fmt;
 use std::fs::File;
 use std::io::{BufReader, BufWriter, Read, Seek, SeekFrom, Write};
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
 /// Largest record the reader accepts: a raw mono8 frame of 5792x5792, far
-/// above any camera this runs with. A corrupt or hostile length beyond it
-/// ends the reading with an error before anything is allocated for it (a
-/// 109-byte file claiming a 400 MiB record costs nothing), so replay and
-/// recover stay within a few frames' worth of memory.
+/// above any camera this runs with. A top-level record above it that fits
+/// the file is skipped without being read into memory, and counted (replay:
+/// [`super::oversized`]; recover: [`RecoverReport::oversized_records`]); a
+/// length beyond it that runs past the end of the file is a cut, reported
+/// before anything is allocated for it (a 109-byte file claiming a 400 MiB
+/// record costs nothing). So replay and recover stay within a few frames'
+/// worth of memory.
 pub const RECORD_LIMIT_BYTES: usize = 32 << 20;
 
 /// Name of the metadata record that lists what a recovery found damaged.
@@ -72,6 +77,8 @@ pub struct RecoverReport {
     pub unreadable_records: u64,
     /// Messages of channels whose channel record was lost, dropped.
     pub unknown_channel_messages: u64,
+    /// Top-level records above [`RECORD_LIMIT_BYTES`], skipped unread.
+    pub oversized_records: u64,
     /// Log time of the last message copied, ns.
     pub last_log_time_ns: Option<u64>,
 }
@@ -116,6 +123,14 @@ impl fmt::Display for RecoverReport {
                 self.skipped_bytes
             )?;
         }
+        if self.oversized_records > 0 {
+            write!(
+                f,
+                "\nSKIPPED: {} records above the {} MiB record bound",
+                self.oversized_records,
+                RECORD_LIMIT_BYTES >> 20
+            )?;
+        }
         if self.unreadable_records > 0 || self.unknown_channel_messages > 0 {
             write!(
                 f,
@@ -135,13 +150,26 @@ pub fn reader_options() -> mcap::sans_io::LinearReaderOptions {
         .with_validate_chunk_crcs(true)
 }
 
+/// The message reader of our logs: the `mcap` crate's, over the file with
+/// its top-level records above [`RECORD_LIMIT_BYTES`] left out.
+pub type LogMessageReader = mcap::io::MessageReader<SkipOversized<BufReader<File>>>;
+
 /// A streaming message reader for our logs (also cut-short ones): reads
-/// uncompressed, zstd and lz4 chunks and unchunked files, checks chunk CRCs.
-pub fn message_reader(path: &Path) -> Result<mcap::io::MessageReader<BufReader<File>>, LogError> {
+/// uncompressed, zstd and lz4 chunks and unchunked files, checks chunk CRCs,
+/// skips top-level records above the bound ([`super::oversized`]).
+pub fn message_reader(path: &Path) -> Result<LogMessageReader, LogError> {
+    Ok(counted_message_reader(path)?.0)
+}
+
+/// [`message_reader`], with the live count of the records it skipped.
+pub fn counted_message_reader(path: &Path) -> Result<(LogMessageReader, Arc<Oversized>), LogError> {
     let file = File::open(path).map_err(|e| LogError::io(path, e))?;
-    Ok(mcap::io::MessageReader::new_with_options(
-        BufReader::with_capacity(1 << 20, file),
-        reader_options(),
+    let len = file.metadata().map_err(|e| LogError::io(path, e))?.len();
+    let source = SkipOversized::new(BufReader::with_capacity(1 << 20, file), len);
+    let skipped = source.skipped();
+    Ok((
+        mcap::io::MessageReader::new_with_options(source, reader_options()),
+        skipped,
     ))
 }
 
@@ -208,6 +236,9 @@ enum Next {
         opcode: u8,
         body: Vec<u8>,
     },
+    /// A record above [`RECORD_LIMIT_BYTES`] that fits the file: passed
+    /// over unread.
+    Oversized,
     /// Clean end of the file at a record boundary.
     End,
     /// A record header or body runs past the end of the file.
@@ -244,6 +275,14 @@ impl Input {
         let opcode = head[0];
         let len = u64::from_le_bytes(head[1..9].try_into().unwrap_or([0; 8]));
         let remaining = self.len.saturating_sub(self.pos);
+        if len > RECORD_LIMIT_BYTES as u64 && len <= remaining && opcode != op::CHUNK {
+            // Seeks over it (a chunk this large goes the way of damage:
+            // looked past for the next valid chunk).
+            self.r
+                .seek_relative(i64::try_from(len).unwrap_or(i64::MAX))?;
+            self.pos += len;
+            return Ok(Next::Oversized);
+        }
         if len > remaining || len > RECORD_LIMIT_BYTES as u64 {
             return Ok(Next::Short {
                 offset,
@@ -645,6 +684,10 @@ pub fn recover(input: &Path, output: &Path) -> Result<RecoverReport, LogError> {
         let next = src.next().map_err(|e| LogError::io(input, e))?;
         match next {
             Next::End => break,
+            Next::Oversized => {
+                c.report.oversized_records += 1;
+                counting = None;
+            }
             Next::Short {
                 offset,
                 opcode,
@@ -759,6 +802,7 @@ pub fn recover(input: &Path, output: &Path) -> Result<RecoverReport, LogError> {
         || c.report.skipped_bytes > 0
         || c.report.unreadable_records > 0
         || c.report.unknown_channel_messages > 0
+        || c.report.oversized_records > 0
     {
         // The damage stays visible in the copy: review prints this record.
         let mut m = BTreeMap::new();

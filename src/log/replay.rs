@@ -1,37 +1,85 @@
 //! Replay: `/camera/image` back as [`Frame`]s, streaming (one record in
 //! memory at a time), with the camera from `/camera/calibration`.
+//!
+//! A top-level record above the record bound is skipped unread and the
+//! reading goes on ([`super::oversized`]); each skip is logged as a warning
+//! when it happens, the total when the log ends, and
+//! [`ReplayReader::oversized_skipped`] counts them.
 
+use super::oversized::Oversized;
+use super::recover::{LogMessageReader, RECORD_LIMIT_BYTES, counted_message_reader};
 use super::{LogError, recover::message_reader, topics};
 use crate::camera::CameraModel;
 use crate::frame::{Frame, FrameOrigin};
 use foxglove::Decode;
 use foxglove::messages::{CameraCalibration, CompressedImage, RawImage};
 use image::GrayImage;
-use std::fs::File;
-use std::io::BufReader;
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
 /// Frames of a log in file order. A cut-short log ends with one `Err` (after
 /// every frame before the cut); a frame that cannot be decoded gives an `Err`
 /// and the reader carries on with the next.
 pub struct ReplayReader {
     path: PathBuf,
-    messages: mcap::io::MessageReader<BufReader<File>>,
+    messages: LogMessageReader,
     camera: Option<CameraModel>,
     done: bool,
+    /// Records above the bound skipped so far, and how many were reported.
+    oversized: Arc<Oversized>,
+    oversized_reported: u64,
 }
 
 /// Opens a log for replay.
 pub fn open(path: &Path) -> Result<ReplayReader, LogError> {
+    let (messages, oversized) = counted_message_reader(path)?;
     Ok(ReplayReader {
         path: path.to_path_buf(),
-        messages: message_reader(path)?,
+        messages,
         camera: None,
         done: false,
+        oversized,
+        oversized_reported: 0,
     })
 }
 
 impl ReplayReader {
+    /// Top-level records above [`RECORD_LIMIT_BYTES`] skipped so far.
+    pub fn oversized_skipped(&self) -> u64 {
+        self.oversized.records()
+    }
+
+    /// Warns of the records skipped since the last warning.
+    fn report_oversized(&mut self) {
+        let n = self.oversized.records();
+        if n > self.oversized_reported {
+            tracing::warn!(
+                "{}: skipped {} MCAP record(s) above the {} MiB record bound, unread \
+                 ({n} so far)",
+                self.path.display(),
+                n - self.oversized_reported,
+                RECORD_LIMIT_BYTES >> 20
+            );
+            self.oversized_reported = n;
+        }
+    }
+
+    /// At the end of the log: the total skipped, when any.
+    fn finish(&mut self) {
+        self.done = true;
+        self.report_oversized();
+        let n = self.oversized.records();
+        if n > 0 {
+            tracing::warn!(
+                "{}: {n} MCAP record(s) ({} bytes) above the {} MiB record bound skipped \
+                 in all",
+                self.path.display(),
+                self.oversized.bytes(),
+                RECORD_LIMIT_BYTES >> 20
+            );
+        }
+    }
+
     /// The camera of the latest `/camera/calibration` read so far (the writer
     /// logs it right after each frame; read one frame first, or use
     /// [`ReplayReader::first_camera`]).
@@ -43,7 +91,8 @@ impl ReplayReader {
     /// from the start again; streams until it finds it).
     pub fn first_camera(path: &Path) -> Result<CameraModel, LogError> {
         for message in message_reader(path)? {
-            let m = message.map_err(|e| LogError::format(path, e))?;
+            let m = message
+                .map_err(|e| LogError::format(path, super::recover::describe_read_error(&e)))?;
             if m.channel.topic == topics::CALIBRATION {
                 let cal = CameraCalibration::decode(m.data.as_ref())
                     .map_err(|e| LogError::format(path, format!("/camera/calibration: {e}")))?;
@@ -124,12 +173,16 @@ impl Iterator for ReplayReader {
         if self.done {
             return None;
         }
-        for message in self.messages.by_ref() {
+        while let Some(message) = self.messages.next() {
+            self.report_oversized();
             let m = match message {
                 Ok(m) => m,
                 Err(e) => {
-                    self.done = true;
-                    return Some(Err(LogError::format(&self.path, e)));
+                    self.finish();
+                    return Some(Err(LogError::format(
+                        &self.path,
+                        super::recover::describe_read_error(&e),
+                    )));
                 }
             };
             match m.channel.topic.as_str() {
@@ -149,7 +202,7 @@ impl Iterator for ReplayReader {
                 _ => {}
             }
         }
-        self.done = true;
+        self.finish();
         None
     }
 }
