@@ -271,8 +271,9 @@ enum Reject {
     NoCanopy(f64),
     /// The evidence score is below `min_score`.
     LowScore(f64),
-    /// Too few of the rim's steps are sharp (share that are): blurred
-    /// beyond what can be measured.
+    /// More than [`CLIPPED_SHARE`] of the rim's steps run into the ends of
+    /// the widest window (share that do): blurred beyond what can be
+    /// measured.
     Blurred(f64),
     /// Too few of the rim's steps are sharp (share that are): a blob out
     /// of focus.
