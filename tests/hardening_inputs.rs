@@ -422,6 +422,7 @@ fn log_with_a_big_record(path: &Path, big: usize) -> u64 {
         topics::image(
             &frame,
             ImageEncoding::Raw,
+            75,
             &mut GrayPngEncoder::default(),
             &mut buf,
         )
