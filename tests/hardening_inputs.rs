@@ -442,7 +442,7 @@ fn log_with_a_big_record(path: &Path, big: usize) -> u64 {
 fn an_oversized_mcap_record_is_skipped_and_counted() {
     use drogue_vision::log::{recover, replay};
     const BIG: usize = 48 << 20;
-    const { assert!(BIG > recover::RECORD_LIMIT_BYTES) };
+    const { assert!(BIG > drogue_vision::log::oversized::RECORD_LIMIT_BYTES) };
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
     let written = log_with_a_big_record(&d.join("big.mcap"), BIG);

@@ -6,7 +6,7 @@
 //! reading them skips over every chunk without decompressing it).
 
 use super::LogError;
-use super::recover::RECORD_LIMIT_BYTES;
+use super::oversized::RECORD_LIMIT_BYTES;
 use mcap::records::{Record, op};
 use std::collections::BTreeMap;
 use std::fs::File;

@@ -28,11 +28,20 @@
 //! through this must leave that check off (the `mcap` default; chunk CRCs
 //! are still checked).
 
-use super::recover::RECORD_LIMIT_BYTES;
 use mcap::records::op;
 use std::io::{self, Read, Seek, SeekFrom};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
+
+/// Largest record the reader accepts: a raw mono8 frame of 5792x5792, far
+/// above any camera this runs with. A top-level record above it that fits
+/// the file is skipped without being read into memory, and counted (replay:
+/// this module; recover: [`super::recover::RecoverReport::oversized_records`]); a
+/// length beyond it that runs past the end of the file is a cut, reported
+/// before anything is allocated for it (a 109-byte file claiming a 400 MiB
+/// record costs nothing). So replay and recover stay within a few frames'
+/// worth of memory.
+pub const RECORD_LIMIT_BYTES: usize = 32 << 20;
 
 /// What a [`SkipOversized`] skipped so far (shared with its owner's caller).
 #[derive(Debug, Default)]

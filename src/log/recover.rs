@@ -23,7 +23,7 @@
 //! yields.
 
 use super::LogError;
-use super::oversized::{Oversized, SkipOversized};
+use super::oversized::{Oversized, RECORD_LIMIT_BYTES, SkipOversized};
 use mcap::records::{self, MessageHeader, Record, op};
 use std::collections::{BTreeMap, HashMap};
 use std::fmt;
@@ -31,16 +31,6 @@ use std::fs::File;
 use std::io::{BufReader, BufWriter, Read, Seek, SeekFrom, Write};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
-
-/// Largest record the reader accepts: a raw mono8 frame of 5792x5792, far
-/// above any camera this runs with. A top-level record above it that fits
-/// the file is skipped without being read into memory, and counted (replay:
-/// [`super::oversized`]; recover: [`RecoverReport::oversized_records`]); a
-/// length beyond it that runs past the end of the file is a cut, reported
-/// before anything is allocated for it (a 109-byte file claiming a 400 MiB
-/// record costs nothing). So replay and recover stay within a few frames'
-/// worth of memory.
-pub const RECORD_LIMIT_BYTES: usize = 32 << 20;
 
 /// Name of the metadata record that lists what a recovery found damaged.
 pub const RECOVER_METADATA: &str = "drogue_vision.recover";

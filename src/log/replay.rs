@@ -7,7 +7,8 @@
 //! [`ReplayReader::oversized_skipped`] counts them.
 
 use super::oversized::Oversized;
-use super::recover::{LogMessageReader, RECORD_LIMIT_BYTES, counted_message_reader};
+use super::oversized::RECORD_LIMIT_BYTES;
+use super::recover::{LogMessageReader, counted_message_reader};
 use super::{LogError, recover::message_reader, topics};
 use crate::camera::CameraModel;
 use crate::frame::{Frame, FrameOrigin};
