@@ -77,7 +77,16 @@ fn camera() -> CameraModel {
     CameraModel::new("bench", 1280, 960, k, [0.0; 5]).unwrap()
 }
 
-fn inputs() -> Vec<(Arc<Frame>, Arc<Measurement>, serde_json::Value)> {
+/// A frame as the pipeline logs it: the frame, its truth, its measurement
+/// and the measurement's JSON record.
+type LoggedFrame = (
+    Arc<Frame>,
+    Box<drogue_sim::FrameTruth>,
+    Arc<Measurement>,
+    serde_json::Value,
+);
+
+fn inputs() -> Vec<LoggedFrame> {
     (0..BATCH)
         .map(|seq| {
             let mut s = seq.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1;
@@ -121,7 +130,7 @@ fn inputs() -> Vec<(Arc<Frame>, Arc<Measurement>, serde_json::Value)> {
                 seq,
                 capture_time_ns: t,
                 image,
-                origin: FrameOrigin::Sim(Box::new(truth)),
+                origin: FrameOrigin::Sim,
             };
             // A typical detection: ~300 rim points.
             let n = 300;
@@ -161,7 +170,7 @@ fn inputs() -> Vec<(Arc<Frame>, Arc<Measurement>, serde_json::Value)> {
             };
             let json = serde_json::to_value(DetectionRecord::from_measurement(seq.to_string(), &m))
                 .unwrap();
-            (Arc::new(frame), Arc::new(m), json)
+            (Arc::new(frame), Box::new(truth), Arc::new(m), json)
         })
         .collect()
 }
@@ -179,12 +188,12 @@ fn log_batch(
     cfg: &LogConfig,
     dir: &Path,
     storage: Box<dyn Storage>,
-    inputs: &[(Arc<Frame>, Arc<Measurement>, serde_json::Value)],
+    inputs: &[LoggedFrame],
 ) -> Duration {
     let start = Instant::now();
     let log = FlightLog::start_with_storage(cfg, dir, &camera(), storage).unwrap();
-    for (f, m, j) in inputs {
-        log.frame(f.clone());
+    for (f, truth, m, j) in inputs {
+        log.frame_with_truth(f.clone(), Some(truth.clone()));
         log.measurement_with_transforms(m.clone(), j.clone(), mount());
     }
     let summary = log.finish().unwrap();

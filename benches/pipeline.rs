@@ -30,7 +30,7 @@ fn frame_triples(scenario: &str, picks: &[usize]) -> (Measurer, Vec<([Frame; 2],
     let mut sim = Simulator::new(Scenario::builtin(scenario).unwrap()).unwrap();
     let mut config = Config::embedded();
     config.mount = mount_config(sim.mount());
-    let measurer = Measurer::new(camera_model(&sim).unwrap(), &config).unwrap();
+    let measurer = Measurer::new(camera_model(&sim).unwrap(), &config.measure()).unwrap();
     let out = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("target/bench-frames")
         .join(scenario);
@@ -46,7 +46,7 @@ fn frame_triples(scenario: &str, picks: &[usize]) -> (Measurer, Vec<([Frame; 2],
                     seq: truth.seq,
                     capture_time_ns: truth.capture_time_ns,
                     image,
-                    origin: FrameOrigin::Sim(Box::new(truth)),
+                    origin: FrameOrigin::Sim,
                 },
             ));
         }

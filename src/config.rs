@@ -10,6 +10,8 @@ use crate::measure::detect::DetectConfig;
 use crate::measure::fit::FitConfig;
 use crate::measure::mount::MountConfig;
 use crate::measure::track::TrackConfig;
+use crate::measure::{DrogueConfig, MeasureConfig};
+pub use crate::source::sim::SitlAnchor;
 use crate::source::v4l::V4lConfig;
 use drogue_sim::bounds::{self, Range};
 use serde::{Deserialize, Serialize};
@@ -168,16 +170,6 @@ pub struct CameraConfig {
     pub file: PathBuf,
 }
 
-/// `[drogue]`: the target's known geometry.
-#[derive(Clone, Debug, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct DrogueConfig {
-    /// Radius of the dark inner circle, metres.
-    pub inner_radius_m: f64,
-    /// Radius of the canopy's outer rim, metres (resolves the ambiguity).
-    pub canopy_radius_m: f64,
-}
-
 /// `[run]`: the live pipeline's defaults.
 #[derive(Clone, Debug, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -207,20 +199,6 @@ pub enum VehiclePoseSource {
     Script,
     /// The autopilot on the MAVLink link (LOCAL_POSITION_NED + ATTITUDE).
     Mavlink,
-}
-
-/// `[run] sitl_anchor`: the autopilot's local NED in the scenario's world.
-/// Both are placed at the autopilot's first pose (a translation and a yaw);
-/// they differ in whether that placement then moves with the tanker.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum SitlAnchor {
-    /// Moves with the tanker: a vehicle holding its position keeps station
-    /// behind the drogue (multicopter SITL).
-    Tanker,
-    /// Fixed in the world: the vehicle itself must fly the tanker's speed
-    /// and course (fixed-wing SITL, scenario `[tanker] airspeed_mps`).
-    World,
 }
 
 /// The whole configuration.
@@ -371,6 +349,17 @@ impl Config {
         crate::measure::track::Tracker::new(&self.track)
             .map(|_| ())
             .map_err(|e| format!("[track] {e}"))
+    }
+
+    /// The sections the measurement reads ([`crate::measure::Measurer::new`]).
+    pub fn measure(&self) -> MeasureConfig {
+        MeasureConfig {
+            drogue: self.drogue.clone(),
+            mount: self.mount.clone(),
+            detect: self.detect.clone(),
+            fit: self.fit.clone(),
+            track: self.track.clone(),
+        }
     }
 
     /// Reads a user config file; `None`: the embedded default.

@@ -1,4 +1,6 @@
-//! One camera frame as it enters the measurement.
+//! One camera frame as it enters the measurement: pixels, capture time and
+//! where it came from; nothing of the simulator (its truth travels beside the
+//! frame, see [`crate::source::Captured`]).
 
 use image::GrayImage;
 use std::path::PathBuf;
@@ -6,8 +8,9 @@ use std::path::PathBuf;
 /// Where a frame came from: kept for logs, errors and replay.
 #[derive(Clone, Debug, PartialEq)]
 pub enum FrameOrigin {
-    /// Rendered by the simulator; carries the exact truth of that frame.
-    Sim(Box<drogue_sim::FrameTruth>),
+    /// Rendered by the simulator (its exact truth travels beside the frame,
+    /// in [`crate::source::Captured`]: the measurement never sees it).
+    Sim,
     /// Read from an image file.
     File(PathBuf),
     /// Read back from an MCAP log (`/camera/image`).
@@ -26,14 +29,4 @@ pub struct Frame {
     pub capture_time_ns: u64,
     pub image: GrayImage,
     pub origin: FrameOrigin,
-}
-
-impl Frame {
-    /// The simulator's truth for this frame, when it has one.
-    pub fn truth(&self) -> Option<&drogue_sim::FrameTruth> {
-        match &self.origin {
-            FrameOrigin::Sim(truth) => Some(truth),
-            _ => None,
-        }
-    }
 }

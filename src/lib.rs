@@ -13,6 +13,7 @@ pub mod image_io;
 pub mod link;
 pub mod log;
 pub mod measure;
+pub mod pipeline;
 pub mod priority;
 pub mod record;
 pub mod source;

@@ -88,8 +88,8 @@ fn init_tracing() -> LogSlot {
         .with(slot)
         .with(
             tracing_subscriber::fmt::layer()
-                .with_writer(commands::run_status::StderrWriter::new())
-                .with_ansi(commands::run_status::colour_allowed()),
+                .with_writer(drogue_vision::pipeline::status::StderrWriter::new())
+                .with_ansi(drogue_vision::pipeline::status::colour_allowed()),
         )
         .with(filter)
         .init();
@@ -125,7 +125,7 @@ fn run(args: commands::run::RunArgs, slot: LogSlot) -> ExitCode {
     };
     match commands::run::run(&args, config, plug_log) {
         Ok(s) => {
-            eprintln!("{}", s.report());
+            eprintln!("{}", commands::run::report(&s));
             ExitCode::SUCCESS
         }
         Err(e @ commands::run::RunError::Setup(_)) => setup_failure(e),

@@ -31,7 +31,7 @@ fn measurer(f: &SweepFrame) -> Measurer {
     let k = nalgebra::Matrix3::new(c.fx, 0.0, c.cx, 0.0, c.fy, c.cy, 0.0, 0.0, 1.0);
     let camera =
         drogue_vision::camera::CameraModel::new("sim", c.width, c.height, k, c.distortion).unwrap();
-    Measurer::new(camera, &Config::embedded()).unwrap()
+    Measurer::new(camera, &Config::embedded().measure()).unwrap()
 }
 
 fn point_on(e: &TruthEllipse, t: f64) -> [f64; 2] {

@@ -33,7 +33,7 @@ fn child_writes_until_killed() {
     for seq in 0.. {
         let m = Arc::new(s::measurement(seq));
         let json = s::detection_json(&m);
-        log.frame(Arc::new(s::frame(seq, true)));
+        log.frame_with_truth(Arc::new(s::frame(seq, true)), Some(Box::new(s::truth(seq))));
         log.measurement_with_transforms(m, json, s::mount());
         writeln!(out, "enqueued {seq}").unwrap();
         out.flush().unwrap();

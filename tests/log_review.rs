@@ -25,7 +25,7 @@ fn write(dir: &Path) -> PathBuf {
     for seq in logged_seqs() {
         let m = Arc::new(s::measurement(seq));
         let json = s::detection_json(&m);
-        log.frame(Arc::new(s::frame(seq, true)));
+        log.frame_with_truth(Arc::new(s::frame(seq, true)), Some(Box::new(s::truth(seq))));
         log.measurement_with_transforms(m, json, s::mount());
         log.mavlink(s::link_event(seq, true));
     }

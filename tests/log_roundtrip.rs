@@ -45,7 +45,7 @@ fn write_log(dir: &Path, cfg: &LogConfig) -> Vec<PathBuf> {
     for seq in 0..FRAMES {
         let m = Arc::new(s::measurement(seq));
         let json = s::detection_json(&m);
-        log.frame(Arc::new(s::frame(seq, true)));
+        log.frame_with_truth(Arc::new(s::frame(seq, true)), Some(Box::new(s::truth(seq))));
         log.measurement_with_transforms(m, json, s::mount());
         log.mavlink(s::link_event(seq, true));
         log.mavlink(s::link_event(seq, false));

@@ -26,7 +26,7 @@ fn truths(set: &Path) -> Vec<Truth> {
 /// Measures every frame of a set as an unrelated view; (truth, errors or None).
 fn measure_set(set: &Path, config: &Config) -> Vec<(Truth, Option<FrameErrors>, bool)> {
     let camera = CameraModel::load(&set.join("camera.yaml")).expect("camera.yaml");
-    let mut measurer = Measurer::new(camera, config).expect("measurer");
+    let mut measurer = Measurer::new(camera, &config.measure()).expect("measurer");
     truths(set)
         .into_iter()
         .enumerate()

@@ -75,7 +75,7 @@ fn truths(set: &Path) -> Vec<Truth> {
 
 fn measure_set(set: &Path) -> SetResult {
     let camera = CameraModel::load(&set.join("camera.yaml")).expect("camera.yaml");
-    let mut measurer = Measurer::new(camera, &Config::embedded()).expect("measurer");
+    let mut measurer = Measurer::new(camera, &Config::embedded().measure()).expect("measurer");
     let mut r = SetResult::default();
     for (seq, t) in truths(set).into_iter().enumerate() {
         let path = set.join(&t.frame);

@@ -29,7 +29,7 @@ fn run_scenario(name: &str, skip: usize, count: usize, config_toml: &str) -> Run
     config.drogue.inner_radius_m = sim.inner_radius_m();
     config.drogue.canopy_radius_m = sim.canopy_radius_m();
     let mut measurer =
-        Measurer::new(camera_model(&sim).expect("camera"), &config).expect("measurer");
+        Measurer::new(camera_model(&sim).expect("camera"), &config.measure()).expect("measurer");
     let mut run = Run {
         detectable: 0,
         detected_of_detectable: 0,
@@ -43,7 +43,7 @@ fn run_scenario(name: &str, skip: usize, count: usize, config_toml: &str) -> Run
             seq: truth.seq,
             capture_time_ns: (truth.t * 1e9) as u64,
             image,
-            origin: FrameOrigin::Sim(Box::new(truth.clone())),
+            origin: FrameOrigin::Sim,
         };
         let m = measurer.measure(&frame);
         let detectable = truth.expect == "detect" && truth.probe_rim_frac <= 0.4;

@@ -16,7 +16,7 @@ thread_local! {
     static MEASURER: RefCell<Measurer> = RefCell::new({
         let k = nalgebra::Matrix3::new(60.0, 0.0, 32.0, 0.0, 60.0, 24.0, 0.0, 0.0, 1.0);
         let camera = CameraModel::new("fuzz", 64, 48, k, [-0.1, 0.01, 0.0, 0.0, 0.0]).unwrap();
-        Measurer::new(camera, &Config::embedded()).unwrap()
+        Measurer::new(camera, &Config::embedded().measure()).unwrap()
     });
 }
 

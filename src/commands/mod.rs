@@ -4,6 +4,4 @@ pub mod process;
 pub mod recover;
 pub mod review;
 pub mod run;
-pub mod run_stats;
-pub mod run_status;
 pub mod sim;

@@ -1,19 +1,23 @@
 //! `drogue-vision process`: offline measurement of a folder of images (or an
-//! MCAP log), one JSON line per frame.
+//! MCAP log), one JSON line per frame: the `run` sources and measurement
+//! stage ([`crate::pipeline`]), in one thread, frame by frame.
 
 use crate::camera::CameraModel;
 use crate::config::Config;
-use crate::frame::{Frame, FrameOrigin};
-use crate::image_io::{check_frame_size, read_gray8};
+use crate::image_io::check_frame_size;
 use crate::log::FlightLog;
-use crate::log::replay::{self, ReplayReader};
 use crate::measure::Measurer;
 use crate::measure::mount::Mount;
+use crate::pipeline::input::choose_camera;
+use crate::pipeline::provenance::{RunProvenance, run_metadata};
+use crate::pipeline::stage::MeasureStage;
 use crate::record::DetectionRecord;
-use crate::source::dir::list_images;
+use crate::source::dir::{DirSource, FolderTiming};
+use crate::source::mcap::McapSource;
+use crate::source::{Captured, FrameSource, SourceItem};
 use indicatif::{ProgressBar, ProgressStyle};
 use std::io::{BufWriter, Write};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::Instant;
 
@@ -93,66 +97,78 @@ fn progress_bar(len: u64) -> ProgressBar {
     bar
 }
 
-/// Frames of the input, each named for its record (file name, or sequence
-/// number for a log), or the reason it could not be read.
-type NamedFrames = Box<dyn Iterator<Item = (String, Result<Frame, String>)>>;
+/// The input's frames through the `run` sources: a folder (`dir:`, frames
+/// [`FOLDER_FRAME_PERIOD_NS`] apart from 0) or a log (`mcap:`, its own times).
+enum Input {
+    Dir(DirSource),
+    Mcap(Box<McapSource>),
+}
 
-/// Opens the input: its frames, camera, count of skipped non-image files and
-/// frame count for the progress bar (0: unknown).
-fn open_input(args: &ProcessArgs) -> Result<(NamedFrames, CameraModel, usize, u64), ProcessError> {
-    let setup = |e: String| ProcessError::Setup(e);
-    let given_camera = args
-        .camera
-        .as_deref()
-        .map(CameraModel::load)
-        .transpose()
-        .map_err(|e| setup(e.to_string()))?;
-    if args.input.is_dir() {
-        let camera =
-            given_camera.ok_or_else(|| setup("a folder of images needs --camera".into()))?;
-        let (images, skipped) = list_images(&args.input).map_err(|e| setup(e.to_string()))?;
-        let total = images.len() as u64;
-        let size = Some((camera.width, camera.height));
-        let frames = images.into_iter().enumerate().map(move |(seq, path)| {
-            let name = path
-                .file_name()
-                .map(|n| n.to_string_lossy().into_owned())
-                .unwrap_or_default();
-            let frame = read_gray8(&path, size).map(|image| Frame {
-                seq: seq as u64,
-                capture_time_ns: seq as u64 * FOLDER_FRAME_PERIOD_NS,
-                image,
-                origin: FrameOrigin::File(path.clone()),
-            });
-            (name, frame)
-        });
-        return Ok((Box::new(frames), camera, skipped, total));
+impl Input {
+    fn open(args: &ProcessArgs) -> Result<Self, ProcessError> {
+        let setup = |e: crate::source::SourceError| ProcessError::Setup(e.to_string());
+        if args.input.is_dir() {
+            if args.camera.is_none() {
+                return Err(ProcessError::Setup(
+                    "a folder of images needs --camera".into(),
+                ));
+            }
+            let timing = FolderTiming::Period(FOLDER_FRAME_PERIOD_NS);
+            return Ok(Self::Dir(
+                DirSource::open(&args.input, timing).map_err(setup)?,
+            ));
+        }
+        if args.input.is_file() {
+            // An MCAP log: replay its /camera/image with its own camera
+            // unless --camera overrides it.
+            let input = args.input.display().to_string();
+            return McapSource::open(&args.input)
+                .map(|m| Self::Mcap(Box::new(m)))
+                .map_err(|e| ProcessError::Setup(format!("input {input}: {e}")));
+        }
+        Err(ProcessError::Setup(format!(
+            "input {}: neither a folder of images nor an MCAP log",
+            args.input.display()
+        )))
     }
-    if args.input.is_file() {
-        // An MCAP log: replay its /camera/image with its own camera unless
-        // --camera overrides it.
-        let input = args.input.display().to_string();
-        let camera = match given_camera {
-            Some(c) => c,
-            None => ReplayReader::first_camera(&args.input).map_err(|e| setup(e.to_string()))?,
+
+    fn source(&mut self) -> &mut dyn FrameSource {
+        match self {
+            Self::Dir(d) => d,
+            Self::Mcap(m) => m.as_mut(),
+        }
+    }
+
+    /// The next item, named for its record: a file's name (an unreadable
+    /// file's error without its path, which the name gives), or a log
+    /// frame's sequence number (`#i` for the i-th item when unreadable).
+    fn next_named(&mut self, index: usize) -> Option<(String, SourceItem)> {
+        let path = match self {
+            Self::Dir(d) => d.peek_path().map(Path::to_path_buf),
+            Self::Mcap(_) => None,
         };
-        let reader = replay::open(&args.input).map_err(|e| setup(format!("input {input}: {e}")))?;
-        let frames = reader.enumerate().map(|(i, item)| match item {
-            Ok(frame) => (frame.seq.to_string(), Ok(frame)),
-            Err(e) => (format!("#{i}"), Err(e.to_string())),
-        });
-        return Ok((Box::new(frames), camera, 0, 0));
+        let item = self.source().next_frame()?;
+        Some(match (path, item) {
+            (Some(path), item) => {
+                let name = path
+                    .file_name()
+                    .map(|n| n.to_string_lossy().into_owned())
+                    .unwrap_or_default();
+                let prefix = format!("{}: ", path.display());
+                let item =
+                    item.map_err(|e| e.strip_prefix(&prefix).map_or(e.clone(), str::to_owned));
+                (name, item)
+            }
+            (None, Ok(c)) => (c.frame.seq.to_string(), Ok(c)),
+            (None, Err(e)) => (format!("#{index}"), Err(e)),
+        })
     }
-    Err(setup(format!(
-        "input {}: neither a folder of images nor an MCAP log",
-        args.input.display()
-    )))
 }
 
 /// What the log's `drogue_vision::run` metadata says about the input: the
 /// source in `run --source` terms (`mcap:` or `dir:`), the camera file, and
 /// no MAVLink (`process` sends none).
-fn provenance(args: &ProcessArgs) -> crate::log::metadata::RunProvenance {
+fn provenance(args: &ProcessArgs) -> RunProvenance {
     let input = args.input.display().to_string();
     let (source, source_details) = if args.input.is_dir() {
         (format!("dir:{input}"), vec![("folder".into(), input)])
@@ -162,7 +178,7 @@ fn provenance(args: &ProcessArgs) -> crate::log::metadata::RunProvenance {
             vec![("replayed_log".into(), input)],
         )
     };
-    crate::log::metadata::RunProvenance {
+    RunProvenance {
         source,
         source_details,
         camera_file: match &args.camera {
@@ -172,6 +188,27 @@ fn provenance(args: &ProcessArgs) -> crate::log::metadata::RunProvenance {
         mavlink: "none (process sends no MAVLink)".into(),
         clock: "source".into(),
     }
+}
+
+/// The input's first item, checked against the camera before anything is
+/// written (a calibration of another size: exit 2, no output files).
+fn first_item_named(
+    input: &mut Input,
+    camera: &CameraModel,
+) -> Result<Option<(String, SourceItem)>, ProcessError> {
+    input.source().expect_size(camera.width, camera.height);
+    let first = input.next_named(0);
+    match &first {
+        Some((_, Ok(c))) => camera
+            .check_frame_size(c.frame.image.width(), c.frame.image.height())
+            .map_err(ProcessError::Setup)?,
+        // A folder's images are refused by their headers.
+        Some((_, Err(e))) if crate::image_io::is_size_mismatch(e) => {
+            return Err(ProcessError::Setup(e.clone()));
+        }
+        _ => {}
+    }
+    Ok(first)
 }
 
 /// Runs `process`. Progress on stderr when it is a terminal.
@@ -187,21 +224,19 @@ pub fn run(args: &ProcessArgs) -> Result<ProcessSummary, ProcessError> {
         }
         config.drogue.inner_radius_m = r;
     }
-    let (frames, camera, skipped, total) = open_input(args)?;
+    let mut input = Input::open(args)?;
+    let (skipped, total) = match &input {
+        Input::Dir(d) => (d.other_files(), d.images() as u64),
+        Input::Mcap(_) => (0, 0),
+    };
+    let camera =
+        choose_camera(input.source(), args.camera.as_deref(), Path::new("")).map_err(setup)?;
     // The first frame decides before anything is written: a calibration of
     // another size is refused (exit 2, no output files).
-    let mut frames = frames.peekable();
-    match frames.peek() {
-        Some((_, Ok(first))) => camera
-            .check_frame_size(first.image.width(), first.image.height())
-            .map_err(setup)?,
-        // A folder's images are refused by their headers.
-        Some((_, Err(e))) if crate::image_io::is_size_mismatch(e) => return Err(setup(e.clone())),
-        _ => {}
-    }
+    let mut first = Some(first_item_named(&mut input, &camera)?);
     let mount = Mount::from_config(&config.mount).map_err(setup)?;
-    let camera_size = (camera.width, camera.height);
-    let mut measurer = Measurer::new(camera.clone(), &config).map_err(|e| setup(e.to_string()))?;
+    let measurer =
+        Measurer::new(camera.clone(), &config.measure()).map_err(|e| setup(e.to_string()))?;
     let mut log_config = config.log.clone();
     log_config.set_drogue(config.drogue.inner_radius_m, config.drogue.canopy_radius_m);
     let log = match &args.log {
@@ -222,7 +257,7 @@ pub fn run(args: &ProcessArgs) -> Result<ProcessSummary, ProcessError> {
         log.set_clock(clock.clone());
         log.metadata(
             crate::log::metadata::RUN_METADATA,
-            crate::log::metadata::run_metadata(&config, &provenance(args)),
+            run_metadata(&config, &provenance(args)),
         );
     }
 
@@ -237,44 +272,32 @@ pub fn run(args: &ProcessArgs) -> Result<ProcessSummary, ProcessError> {
         ..Default::default()
     };
     let mut measure_time = std::time::Duration::ZERO;
-    for (name, item) in frames {
+    let mut stage = MeasureStage::new(measurer, mount, None, log.clone(), clock.clone());
+    let mut index = 0;
+    while let Some((name, item)) = first.take().flatten().or_else(|| input.next_named(index)) {
+        index += 1;
         // Frames are sized by the calibration (a log's, or --camera).
-        let item = item.and_then(|f| check_frame_size(&f.image, measurer.camera()).map(|()| f));
+        let item = item.and_then(|c| check_frame_size(&c.frame.image, &camera).map(|()| c));
         let record = match item {
             Err(e) => {
                 summary.unreadable += 1;
                 tracing::warn!(frame = %name, "unreadable frame: {e}");
                 DetectionRecord::unreadable(name, e)
             }
-            Ok(frame) if camera_size != (frame.image.width(), frame.image.height()) => {
-                let e = format!(
-                    "{}x{} frame, the camera calibration is for {}x{}",
-                    frame.image.width(),
-                    frame.image.height(),
-                    camera_size.0,
-                    camera_size.1
-                );
-                summary.unreadable += 1;
-                tracing::warn!(frame = %name, "frame skipped: {e}");
-                DetectionRecord::unreadable(name, e)
-            }
-            Ok(frame) => {
+            Ok(Captured { frame, truth }) => {
                 if args.independent {
-                    measurer.forget_track();
+                    stage.measurer_mut().forget_track();
                 }
                 clock.start_at(frame.capture_time_ns);
                 clock.advance_to(frame.capture_time_ns);
-                let t = Instant::now();
-                let m = measurer.measure(&frame);
-                measure_time += t.elapsed();
-                summary.detected += usize::from(m.detection.is_some());
-                let record = DetectionRecord::from_measurement(name, &m);
                 if let Some(log) = &log {
-                    log.frame(Arc::new(frame));
-                    let json = serde_json::to_value(&record).unwrap_or_default();
-                    log.measurement(Arc::new(m), json, &mount);
+                    log.frame_with_truth(Arc::new(frame.clone()), truth);
                 }
-                record
+                let t = Instant::now();
+                let measured = stage.measure(&frame, name);
+                measure_time += t.elapsed();
+                summary.detected += usize::from(measured.measurement.detection.is_some());
+                measured.record
             }
         };
         summary.frames += 1;

@@ -325,7 +325,8 @@ pub(crate) struct MeasurementItem {
 
 /// What the queue carries to the writer thread.
 pub(crate) enum Item {
-    Frame(Arc<Frame>),
+    /// A frame, with the simulator's truth of it when there is one.
+    Frame(Arc<Frame>, Option<Box<drogue_sim::FrameTruth>>),
     Measurement(Box<MeasurementItem>),
     Link(Box<LinkEvent>),
     Log(Box<LogEvent>),
@@ -525,7 +526,7 @@ impl LogHandle {
     }
 
     /// An MCAP metadata record (name, key/values) for this file and every
-    /// later part of the run ([`metadata::run_metadata`] builds the run's).
+    /// later part of the run (`pipeline::provenance::run_metadata` builds the run's).
     /// Waits for room in the queue: it is sent once, at the start.
     pub fn metadata(&self, name: &str, values: std::collections::BTreeMap<String, String>) {
         let item = Item::Metadata(Box::new(mcap::records::Metadata {
@@ -547,10 +548,15 @@ impl LogHandle {
             .load(Ordering::Relaxed)
     }
 
-    /// `/camera/image`, `/camera/calibration`, and `/sim/truth` when
-    /// `frame.truth()` is Some.
+    /// `/camera/image` and `/camera/calibration`.
     pub fn frame(&self, frame: Arc<Frame>) {
-        self.push(Item::Frame(frame));
+        self.push(Item::Frame(frame, None));
+    }
+
+    /// [`LogHandle::frame`] and `/sim/truth`, the simulator's truth of the
+    /// frame, logged at the frame's capture time.
+    pub fn frame_with_truth(&self, frame: Arc<Frame>, truth: Option<Box<drogue_sim::FrameTruth>>) {
+        self.push(Item::Frame(frame, truth));
     }
 
     /// `/drogue/annotations`, `/drogue/detection` (the given JSON: the

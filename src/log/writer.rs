@@ -242,7 +242,7 @@ impl Writer {
 
     fn handle(&mut self, item: Item) {
         match item {
-            Item::Frame(frame) => self.frame(&frame),
+            Item::Frame(frame, truth) => self.frame(&frame, truth.as_deref()),
             Item::Measurement(m) => self.measurement(*m),
             Item::Link(e) => self.link(&e),
             Item::Log(e) => self.write_log_event(&e),
@@ -252,7 +252,7 @@ impl Writer {
         }
     }
 
-    fn frame(&mut self, frame: &Arc<Frame>) {
+    fn frame(&mut self, frame: &Arc<Frame>, truth: Option<&drogue_sim::FrameTruth>) {
         let t = frame.capture_time_ns;
         let seq = frame.seq;
         let mut buf = std::mem::take(&mut self.buf);
@@ -282,7 +282,7 @@ impl Writer {
         }
         let cal = topics::calibration(&self.camera, t);
         self.write_proto(topics::CALIBRATION, seq, t, &cal, &mut buf);
-        if let Some(truth) = frame.truth() {
+        if let Some(truth) = truth {
             self.write_json(topics::SIM_TRUTH, seq, t, t, truth, &mut buf);
         }
         self.buf = buf;

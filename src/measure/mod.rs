@@ -13,7 +13,6 @@ pub mod pose;
 pub mod track;
 
 use crate::camera::CameraModel;
-use crate::config::Config;
 use crate::frame::Frame;
 use ellipse::Ellipse;
 use nalgebra::{Matrix3, Vector3};
@@ -21,6 +20,29 @@ use serde::{Deserialize, Serialize};
 use std::time::Instant;
 
 pub use pose::CirclePose;
+
+/// `[drogue]`: the target's known geometry.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DrogueConfig {
+    /// Radius of the dark inner circle, metres.
+    pub inner_radius_m: f64,
+    /// Radius of the canopy's outer rim, metres (resolves the ambiguity).
+    pub canopy_radius_m: f64,
+}
+
+/// What the measurement needs from the configuration, and nothing more: the
+/// `[drogue]`, `[mount]`, `[detect]`, `[fit]` and `[track]` sections (see
+/// `Config::measure`). Kept apart so that the measurement depends on no
+/// module above it.
+#[derive(Clone, Debug)]
+pub struct MeasureConfig {
+    pub drogue: DrogueConfig,
+    pub mount: mount::MountConfig,
+    pub detect: detect::DetectConfig,
+    pub fit: fit::FitConfig,
+    pub track: track::TrackConfig,
+}
 
 /// How the single-circle two-fold ambiguity was settled for a detection.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -127,7 +149,7 @@ fn micros_since(t: Instant) -> u32 {
 }
 
 impl Measurer {
-    pub fn new(camera: CameraModel, config: &Config) -> Result<Self, MeasureSetupError> {
+    pub fn new(camera: CameraModel, config: &MeasureConfig) -> Result<Self, MeasureSetupError> {
         let d = &config.drogue;
         if !(d.inner_radius_m > 0.0 && d.canopy_radius_m > d.inner_radius_m) {
             return Err(MeasureSetupError::Drogue(format!(

@@ -1,6 +1,7 @@
-//! `dir:` source: the images of a folder, in lexicographic order.
+//! `dir:` source: the images of a folder, in lexicographic order, with the
+//! capture times of a [`FolderTiming`].
 
-use super::{FrameSource, SourceError, SourceItem};
+use super::{Captured, FrameSource, SourceError, SourceItem};
 use crate::camera::CameraModel;
 use crate::frame::{Frame, FrameOrigin};
 use crate::image_io::{is_image_path, read_gray8};
@@ -31,22 +32,54 @@ pub fn list_images(dir: &Path) -> Result<(Vec<PathBuf>, usize), SourceError> {
     Ok((images, others))
 }
 
-/// Reads a folder's images one by one; capture time = the time of reading.
+/// The capture times a folder's frames get (a folder records none).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum FolderTiming {
+    /// The time each image is read (`run --source dir:`).
+    ReadTime,
+    /// Frame `seq` at `seq` × this period, ns, from 0 (`process`): the same
+    /// times on every run, for the tracker's prediction.
+    Period(u64),
+}
+
+/// Reads a folder's images one by one, in lexicographic order.
 pub struct DirSource {
     images: std::vec::IntoIter<PathBuf>,
     seq: u64,
+    timing: FolderTiming,
+    /// Image files in the folder, and other files (not read).
+    images_total: usize,
+    others: usize,
     /// The camera's frame size, once known.
     expected: Option<(u32, u32)>,
 }
 
 impl DirSource {
-    pub fn open(dir: &Path) -> Result<Self, SourceError> {
-        let (images, _) = list_images(dir)?;
+    pub fn open(dir: &Path, timing: FolderTiming) -> Result<Self, SourceError> {
+        let (images, others) = list_images(dir)?;
         Ok(Self {
+            images_total: images.len(),
             images: images.into_iter(),
             seq: 0,
+            timing,
+            others,
             expected: None,
         })
+    }
+
+    /// The folder's image files (each one item).
+    pub fn images(&self) -> usize {
+        self.images_total
+    }
+
+    /// Files in the folder that are not images (not read).
+    pub fn other_files(&self) -> usize {
+        self.others
+    }
+
+    /// The next image's path, before [`FrameSource::next_frame`] reads it.
+    pub fn peek_path(&self) -> Option<&Path> {
+        self.images.as_slice().first().map(PathBuf::as_path)
     }
 }
 
@@ -75,14 +108,19 @@ impl FrameSource for DirSource {
         let path = self.images.next()?;
         let seq = self.seq;
         self.seq += 1;
+        let capture_time_ns = match self.timing {
+            FolderTiming::ReadTime => unix_now_ns(),
+            FolderTiming::Period(ns) => seq.saturating_mul(ns),
+        };
         Some(
             read_gray8(&path, self.expected)
                 .map(|image| Frame {
                     seq,
-                    capture_time_ns: unix_now_ns(),
+                    capture_time_ns,
                     image,
                     origin: FrameOrigin::File(path.clone()),
                 })
+                .map(Captured::from)
                 .map_err(|e| format!("{}: {e}", path.display())),
         )
     }

@@ -1,6 +1,6 @@
 //! `mcap:` source: the `/camera/image` frames of a flight log, for replay.
 
-use super::{FrameSource, SourceError, SourceItem};
+use super::{Captured, FrameSource, SourceError, SourceItem};
 use crate::camera::CameraModel;
 use crate::log::replay::{self, ReplayReader};
 use crate::measure::mount::MountConfig;
@@ -10,7 +10,9 @@ use std::path::Path;
 pub struct McapSource {
     path: std::path::PathBuf,
     reader: ReplayReader,
-    camera: CameraModel,
+    /// The log's own camera (`/camera/calibration`), or why it has none (a
+    /// log without one needs `--camera`).
+    camera: Result<CameraModel, String>,
 }
 
 impl McapSource {
@@ -21,7 +23,8 @@ impl McapSource {
         };
         Ok(Self {
             path: path.to_path_buf(),
-            camera: ReplayReader::first_camera(path).map_err(open_err)?,
+            camera: ReplayReader::first_camera(path)
+                .map_err(|e| format!("mcap:{}: {e}", path.display())),
             reader: replay::open(path).map_err(open_err)?,
         })
     }
@@ -29,7 +32,10 @@ impl McapSource {
 
 impl FrameSource for McapSource {
     fn camera(&self) -> Option<CameraModel> {
-        Some(self.camera.clone())
+        self.camera.as_ref().ok().cloned()
+    }
+    fn no_camera_reason(&self) -> Option<String> {
+        self.camera.as_ref().err().cloned()
     }
     fn mount(&self) -> Option<MountConfig> {
         None
@@ -44,6 +50,8 @@ impl FrameSource for McapSource {
         vec![("replayed_log".to_string(), self.path.display().to_string())]
     }
     fn next_frame(&mut self) -> Option<SourceItem> {
-        self.reader.next().map(|r| r.map_err(|e| e.to_string()))
+        self.reader
+            .next()
+            .map(|r| r.map(Captured::from).map_err(|e| e.to_string()))
     }
 }

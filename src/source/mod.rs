@@ -54,14 +54,35 @@ impl std::str::FromStr for SourceSpec {
     }
 }
 
+/// A frame as a source delivers it. The simulator's exact truth of the frame
+/// travels beside it, for the log (`/sim/truth`) and tests; the measurement
+/// gets the frame alone.
+#[derive(Clone, Debug)]
+pub struct Captured {
+    pub frame: Frame,
+    pub truth: Option<Box<drogue_sim::FrameTruth>>,
+}
+
+impl From<Frame> for Captured {
+    /// A frame without truth (every source but the simulator).
+    fn from(frame: Frame) -> Self {
+        Self { frame, truth: None }
+    }
+}
+
 /// One item a source yields: a frame, or a frame it could not read (reported
 /// and skipped by the pipeline).
-pub type SourceItem = Result<Frame, String>;
+pub type SourceItem = Result<Captured, String>;
 
 /// What every source offers the pipeline.
 pub trait FrameSource: Send {
     /// The camera of this source, when it knows it (the simulator, a log).
     fn camera(&self) -> Option<CameraModel>;
+    /// Why [`FrameSource::camera`] is `None` where a camera was expected
+    /// (a log without a readable `/camera/calibration`), for the error.
+    fn no_camera_reason(&self) -> Option<String> {
+        None
+    }
     /// The camera mount of this source, when it knows it (the simulator).
     fn mount(&self) -> Option<MountConfig>;
     /// Nominal frame rate, when known (for pacing and staleness).

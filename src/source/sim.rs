@@ -1,13 +1,13 @@
 //! `sim:` source: frames rendered by the simulator, with their truth.
 
-use super::{FrameSource, SourceError, SourceItem};
+use super::{Captured, FrameSource, SourceError, SourceItem};
 use crate::camera::CameraModel;
-use crate::config::SitlAnchor;
 use crate::frame::{Frame, FrameOrigin};
 use crate::measure::mount::MountConfig;
 use drogue_sim::trajectory::World;
 use drogue_sim::{MountSpec, NED_FRAME_AUTOPILOT, Scenario, Simulator};
 use nalgebra::{Quaternion, Rotation3, UnitQuaternion, Vector3};
+use serde::{Deserialize, Serialize};
 
 /// The simulator's camera mount in the config's terms (both use the mount
 /// convention of ARCHITECTURE.md section 3).
@@ -103,15 +103,29 @@ impl SimSource {
             anchor.to_world(position_autopilot_m, q_autopilot_body, t_s);
         self.sim.set_receiver_pose(position_world_m, q_world_body);
         let mut item = self.next_frame()?;
-        if let Ok(frame) = &mut item {
-            frame.capture_time_ns = capture_time_ns;
-            if let FrameOrigin::Sim(truth) = &mut frame.origin {
+        if let Ok(captured) = &mut item {
+            captured.frame.capture_time_ns = capture_time_ns;
+            if let Some(truth) = &mut captured.truth {
                 anchor.truth_to_autopilot(truth);
                 truth.capture_time_ns = capture_time_ns;
             }
         }
         Some(item)
     }
+}
+
+/// `[run] sitl_anchor`: the autopilot's local NED in the scenario's world.
+/// Both are placed at the autopilot's first pose (a translation and a yaw);
+/// they differ in whether that placement then moves with the tanker.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SitlAnchor {
+    /// Moves with the tanker: a vehicle holding its position keeps station
+    /// behind the drogue (multicopter SITL).
+    Tanker,
+    /// Fixed in the world: the vehicle itself must fly the tanker's speed
+    /// and course (fixed-wing SITL, scenario `[tanker] airspeed_mps`).
+    World,
 }
 
 /// Where the autopilot's local NED (origin at its EKF origin, any heading)
@@ -267,11 +281,14 @@ impl FrameSource for SimSource {
         let start_ns = self.sim.start_time_ns();
         let (image, truth) = self.sim.next_frame()?;
         self.delivered += 1;
-        Some(Ok(Frame {
-            seq: truth.seq,
-            capture_time_ns: start_ns + (truth.t * 1e9).round() as u64,
-            image,
-            origin: FrameOrigin::Sim(Box::new(truth)),
+        Some(Ok(Captured {
+            frame: Frame {
+                seq: truth.seq,
+                capture_time_ns: start_ns + (truth.t * 1e9).round() as u64,
+                image,
+                origin: FrameOrigin::Sim,
+            },
+            truth: Some(Box::new(truth)),
         }))
     }
 }
@@ -351,12 +368,12 @@ mod tests {
         let anchor =
             AutopilotAnchor::new(src.simulator().scenario(), SitlAnchor::Tanker, p0, q0).unwrap();
         let capture = 1_800_000_000_123_456_789;
-        let frame = src
+        let captured = src
             .next_frame_from_autopilot(&anchor, p0, q0, capture)
             .unwrap()
             .unwrap();
-        assert_eq!(frame.capture_time_ns, capture);
-        let t = frame.truth().unwrap();
+        assert_eq!(captured.frame.capture_time_ns, capture);
+        let t = captured.truth.as_deref().unwrap();
         assert_eq!(t.ned_frame, NED_FRAME_AUTOPILOT);
         assert_eq!(t.capture_time_ns, capture);
         assert!(close(t.receiver_position_ned, p0, 1e-9));

@@ -115,7 +115,7 @@ pub fn frame(seq: u64, with_truth: bool) -> Frame {
         capture_time_ns: time_ns(seq),
         image: image(seq, WIDTH, HEIGHT),
         origin: if with_truth {
-            FrameOrigin::Sim(Box::new(truth(seq)))
+            FrameOrigin::Sim
         } else {
             FrameOrigin::Camera {
                 device: "test".into(),

@@ -123,7 +123,8 @@ impl Measurers {
         let i = match self.by_lens.iter().position(|(d, _)| *d == cam.distortion) {
             Some(i) => i,
             None => {
-                let m = Measurer::new(camera_model(cam), &Config::embedded()).expect("measurer");
+                let m = Measurer::new(camera_model(cam), &Config::embedded().measure())
+                    .expect("measurer");
                 self.by_lens.push((cam.distortion, m));
                 self.by_lens.len() - 1
             }

@@ -8,7 +8,7 @@ use super::clock::{ClockOffset, SequenceTracker, TimeSource, capture_time_ns};
 use crate::camera::CameraModel;
 use crate::frame::{Frame, FrameOrigin};
 use crate::measure::mount::MountConfig;
-use crate::source::{FrameSource, SourceItem};
+use crate::source::{Captured, FrameSource, SourceItem};
 use image::GrayImage;
 use std::panic::{AssertUnwindSafe, catch_unwind};
 use std::time::{Duration, Instant};
@@ -254,14 +254,14 @@ impl<O: CameraOpener> FrameSource for LiveSource<O> {
         match buffer.image {
             Ok(image) => {
                 self.stats.frames += 1;
-                Some(Ok(Frame {
+                Some(Ok(Captured::from(Frame {
                     seq,
                     capture_time_ns,
                     image,
                     origin: FrameOrigin::Camera {
                         device: self.name.clone(),
                     },
-                }))
+                })))
             }
             Err(e) => {
                 self.stats.unreadable += 1;
@@ -420,7 +420,9 @@ mod tests {
             ],
             0,
         );
-        let f: Vec<Frame> = (0..3).map(|_| s.next_frame().unwrap().unwrap()).collect();
+        let f: Vec<Frame> = (0..3)
+            .map(|_| s.next_frame().unwrap().unwrap().frame)
+            .collect();
         assert_eq!(f.iter().map(|f| f.seq).collect::<Vec<_>>(), [0, 1, 4]);
         assert_eq!(f[0].capture_time_ns, 1_700_000_005_000_000_000);
         assert_eq!(f[2].capture_time_ns, 1_700_000_005_133_333_000);
@@ -453,7 +455,7 @@ mod tests {
             e.contains("/dev/video9") && e.contains("does not decode"),
             "{e}"
         );
-        assert_eq!(s.next_frame().unwrap().unwrap().seq, 1);
+        assert_eq!(s.next_frame().unwrap().unwrap().frame.seq, 1);
         assert_eq!(s.stats().unreadable, 1);
         assert_eq!(*opens.lock().unwrap(), 1, "a bad frame must not reopen");
     }
@@ -480,7 +482,7 @@ mod tests {
             ],
             0,
         );
-        assert_eq!(s.next_frame().unwrap().unwrap().seq, 0);
+        assert_eq!(s.next_frame().unwrap().unwrap().frame.seq, 0);
         *failures.lock().unwrap() = 3;
         let lost = s.next_frame().unwrap().unwrap_err();
         assert!(lost.contains("reopening in 1 ms"), "{lost}");
@@ -492,10 +494,10 @@ mod tests {
         for (e, ms) in waits.iter().zip([2, 4, 4]) {
             assert!(e.contains(&format!("next attempt in {ms} ms")), "{e}");
         }
-        let back = s.next_frame().unwrap().unwrap();
+        let back = s.next_frame().unwrap().unwrap().frame;
         assert_eq!(back.seq, 1, "sequence numbers never go back");
         assert_eq!(back.capture_time_ns, 1_700_000_009_000_000_000);
-        assert_eq!(s.next_frame().unwrap().unwrap().seq, 2);
+        assert_eq!(s.next_frame().unwrap().unwrap().frame.seq, 2);
         let st = s.stats();
         assert_eq!((st.losses, st.reopens, st.frames), (1, 1, 3));
         assert_eq!(st.dropped_by_driver, 0);

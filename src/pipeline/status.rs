@@ -4,14 +4,15 @@
 //! Colours only on a terminal, and never with `NO_COLOR` set
 //! (<https://no-color.org>).
 //!
-//! The figures come from counters the pipeline keeps anyway ([`Vitals`]):
-//! nothing here is on the frame path.
+//! The figures come from counters the pipeline keeps anyway
+//! ([`PipelineMeters`]): nothing here is on the frame path.
 
+use super::meters::PipelineMeters;
 use crate::link::LinkHandle;
 use std::io::{IsTerminal, Write};
 use std::path::PathBuf;
 use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant, SystemTime};
 
@@ -23,39 +24,6 @@ const PLAIN_PERIOD: Duration = Duration::from_secs(10);
 /// Whether stderr may carry colours: a terminal, and `NO_COLOR` unset or empty.
 pub fn colour_allowed() -> bool {
     std::io::stderr().is_terminal() && std::env::var_os("NO_COLOR").is_none_or(|v| v.is_empty())
-}
-
-/// Live figures of the run, bumped by the pipeline's threads.
-#[derive(Default)]
-pub struct Vitals {
-    pub frames: AtomicU64,
-    pub measured: AtomicU64,
-    pub detected: AtomicU64,
-    /// Range of the last detection, metres, as f64 bits (0: none yet).
-    last_range_bits: AtomicU64,
-    /// Capture → send of the last pose, ms, as f64 bits (0: none yet).
-    last_latency_bits: AtomicU64,
-}
-
-impl Vitals {
-    pub fn set_range_m(&self, r: f64) {
-        self.last_range_bits.store(r.to_bits(), Ordering::Relaxed);
-    }
-
-    pub fn set_latency_ms(&self, ms: f64) {
-        self.last_latency_bits
-            .store(ms.to_bits(), Ordering::Relaxed);
-    }
-
-    fn range_m(&self) -> Option<f64> {
-        let r = f64::from_bits(self.last_range_bits.load(Ordering::Relaxed));
-        (r > 0.0).then_some(r)
-    }
-
-    fn latency_ms(&self) -> Option<f64> {
-        let l = f64::from_bits(self.last_latency_bits.load(Ordering::Relaxed));
-        (l > 0.0).then_some(l)
-    }
 }
 
 /// Bytes of this run's MCAP files so far: the `.mcap` files of `dir`
@@ -77,8 +45,8 @@ fn log_bytes(dir: &PathBuf, since: SystemTime) -> u64 {
 }
 
 /// One status text; `colour` wraps the link state in green, yellow or red.
-fn status_text(vitals: &Vitals, link: &LinkHandle, log_bytes: u64, colour: bool) -> String {
-    let frames = vitals.frames.load(Ordering::Relaxed);
+fn status_text(vitals: &PipelineMeters, link: &LinkHandle, log_bytes: u64, colour: bool) -> String {
+    let frames = vitals.frames_in.load(Ordering::Relaxed);
     let measured = vitals.measured.load(Ordering::Relaxed);
     let detected = vitals.detected.load(Ordering::Relaxed);
     let pct = if measured > 0 {
@@ -119,7 +87,7 @@ pub struct StatusReporter {
 }
 
 impl StatusReporter {
-    pub fn spawn(vitals: Arc<Vitals>, link: LinkHandle, log_dir: PathBuf) -> Self {
+    pub fn spawn(vitals: Arc<PipelineMeters>, link: LinkHandle, log_dir: PathBuf) -> Self {
         let terminal = std::io::stderr().is_terminal();
         let colour = colour_allowed();
         let stop = Arc::new(AtomicBool::new(false));
@@ -243,11 +211,12 @@ mod tests {
         let link =
             crate::link::Link::start(&cfg, Some("serial:/nonexistent/tty:57600"), rt.handle())
                 .unwrap();
-        let v = Vitals::default();
-        v.frames.store(30, Ordering::Relaxed);
-        v.measured.store(20, Ordering::Relaxed);
-        v.detected.store(15, Ordering::Relaxed);
-        v.set_range_m(12.345);
+        let v = PipelineMeters::default();
+        v.frames_in.store(30, Ordering::Relaxed);
+        v.measured.store(5, Ordering::Relaxed);
+        for _ in 0..15 {
+            v.frame_measured(Some(12.345));
+        }
         v.set_latency_ms(4.26);
         let plain = status_text(&v, &link, 2_500_000, false);
         assert_eq!(

@@ -1,4 +1,7 @@
-//! The run's resource figures, sampled every second into `/drogue/stats`.
+//! The pipeline's counters (frames in, measured, detected, skipped, the
+//! last range and latency) and its resource figures, sampled every second
+//! into `/drogue/stats`. One set of counters: the status line, the stats
+//! records and the end-of-run summary all read these.
 //!
 //! What a companion-computer user needs to know before flying: the CPU the
 //! pipeline takes (the process's, less what the source spends making frames,
@@ -20,9 +23,20 @@ pub const STATS_PERIOD: Duration = Duration::from_secs(1);
 /// Counters the pipeline's threads update as they go.
 #[derive(Debug, Default)]
 pub struct PipelineMeters {
+    /// Items the source delivered (frames and unreadable ones).
     pub frames_in: AtomicU64,
+    /// Frames not measured because the measurement was still busy.
     pub skipped: AtomicU64,
+    /// Items the source could not deliver (reported and skipped).
+    pub unreadable: AtomicU64,
     pub measured: AtomicU64,
+    pub detected: AtomicU64,
+    /// `--fast`: frames the link was not done with in time.
+    pub link_handoff_timeouts: AtomicU64,
+    /// Range of the last detection, metres, as f64 bits (0: none yet).
+    last_range_bits: AtomicU64,
+    /// Capture → send of the last pose, ms, as f64 bits (0: none yet).
+    last_latency_bits: AtomicU64,
     /// CPU time spent inside the source (rendering, decoding), ns.
     source_cpu_ns: AtomicU64,
     /// The measurement thread's own CPU time so far, ns.
@@ -48,12 +62,39 @@ impl PipelineMeters {
         out
     }
 
-    /// Called by the measurement thread after each frame.
-    pub fn frame_measured(&self) {
+    /// Called by the measurement thread after each frame, with the range of
+    /// its detection (if any).
+    pub fn frame_measured(&self, detected_range_m: Option<f64>) {
         self.measured.fetch_add(1, Ordering::Relaxed);
+        if let Some(r) = detected_range_m {
+            self.detected.fetch_add(1, Ordering::Relaxed);
+            self.last_range_bits.store(r.to_bits(), Ordering::Relaxed);
+        }
         if let Some(t) = thread_cpu_ns() {
             self.measure_cpu_ns.store(t, Ordering::Relaxed);
         }
+    }
+
+    pub fn set_latency_ms(&self, ms: f64) {
+        self.last_latency_bits
+            .store(ms.to_bits(), Ordering::Relaxed);
+    }
+
+    /// Range of the last detection, metres.
+    pub fn range_m(&self) -> Option<f64> {
+        let r = f64::from_bits(self.last_range_bits.load(Ordering::Relaxed));
+        (r > 0.0).then_some(r)
+    }
+
+    /// Capture → send of the last pose sent, ms.
+    pub fn latency_ms(&self) -> Option<f64> {
+        let l = f64::from_bits(self.last_latency_bits.load(Ordering::Relaxed));
+        (l > 0.0).then_some(l)
+    }
+
+    /// A counter's value now.
+    pub fn get(counter: &AtomicU64) -> u64 {
+        counter.load(Ordering::Relaxed)
     }
 }
 
