@@ -1,8 +1,9 @@
 //! drogue-vision: the drogue's pose from one camera, streamed to the autopilot.
 //!
-//! Data flow (see `ARCHITECTURE.md`): `source` yields [`frame::Frame`]s, `measure`
-//! turns each into a [`measure::Measurement`], `link` streams it over MAVLink and
-//! `log` writes everything to MCAP.
+//! Data flow (see `ARCHITECTURE.md`): `source` yields [`frame::Frame`]s,
+//! `pipeline` hands each to `measure`, which turns it into a
+//! [`measure::Measurement`]; `link` streams it over MAVLink and `log` writes
+//! everything to MCAP. `commands` are the binary's subcommands.
 
 pub mod camera;
 pub mod clock;

@@ -91,3 +91,31 @@ fn every_module_uses_only_lower_layers() {
         wrong.join("\n")
     );
 }
+
+/// Every "ARCHITECTURE.md section N" cited in the code and the default
+/// config names a section the file has.
+#[test]
+fn every_cited_architecture_section_exists() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let doc = std::fs::read_to_string(root.join("ARCHITECTURE.md")).expect("ARCHITECTURE.md");
+    let mut files = Vec::new();
+    rust_files(&root.join("src"), &mut files);
+    files.push(root.join("config/default.toml"));
+    let mut cited = 0;
+    for file in &files {
+        let text = std::fs::read_to_string(file).expect("read");
+        for (i, _) in text.match_indices("ARCHITECTURE.md section ") {
+            let n: String = text[i + 24..]
+                .chars()
+                .take_while(char::is_ascii_digit)
+                .collect();
+            cited += 1;
+            assert!(
+                doc.contains(&format!("\n## {n}. ")),
+                "{} cites ARCHITECTURE.md section {n}, which it does not have",
+                file.display()
+            );
+        }
+    }
+    assert!(cited >= 5, "only {cited} citations found");
+}

@@ -78,16 +78,16 @@ fn review_reports_the_runs_resources_from_its_stats_records() {
     // Three samples a second apart: the process used 0.5 s of CPU per second,
     // the source 0.3 s of it, so the pipeline 20 % and the source 30 %.
     let samples = [
-        (0.0, 0.0, 40e6, 3, 1),
-        (0.5, 0.3, 52e6, 9, 0),
-        (1.0, 0.6, 47e6, 2, 4),
+        (0.0, 0.0, 0.0, 40e6, 3, 1),
+        (0.5, 0.3, 0.05, 52e6, 9, 0),
+        (1.0, 0.6, 0.1, 47e6, 2, 4),
     ];
-    for (i, (process, source, rss, log_q, link_q)) in samples.into_iter().enumerate() {
+    for (i, (process, source, writer, rss, log_q, link_q)) in samples.into_iter().enumerate() {
         log.stats(serde_json::json!({
             "time_ns": s::T0_NS + i as u64 * 1_000_000_000,
             "interval_s": 1.0,
             "cpu_pct": {"process": 50.0, "source": 30.0, "pipeline": 20.0 + i as f64, "measurement": 10.0},
-            "cpu_s_total": {"process": process, "source": source, "measurement": 0.1},
+            "cpu_s_total": {"process": process, "source": source, "measurement": 0.1, "log_writer": writer},
             "rss_bytes": rss as u64,
             "queues": {"log": log_q, "log_dropped": 0, "link_events": link_q, "link_events_dropped": 0},
             "frames": {"in": 30 * i, "measured": 30 * i, "skipped": 0},
@@ -98,12 +98,15 @@ fn review_reports_the_runs_resources_from_its_stats_records() {
     println!("{r}");
     let res = r.resources.clone().expect("resources reviewed");
     assert_eq!(res.samples, 3);
-    assert!((res.pipeline_cpu_pct - 20.0).abs() < 1e-9, "{res:?}");
+    // Over 2 s: process 1.0 s, source 0.6 s, log writer 0.1 s of CPU.
+    assert!((res.pipeline_cpu_pct - 15.0).abs() < 1e-9, "{res:?}");
     assert!((res.source_cpu_pct - 30.0).abs() < 1e-9, "{res:?}");
+    assert!((res.log_writer_cpu_pct - 5.0).abs() < 1e-9, "{res:?}");
     assert_eq!(res.pipeline_cpu_max_pct, 22.0);
     assert_eq!(res.peak_rss_bytes, 52_000_000);
     assert_eq!(res.max_log_queue, 9);
     assert_eq!(res.last_log_queue, 2);
     assert_eq!(res.max_link_event_queue, 4);
-    assert!(r.to_string().contains("pipeline CPU 20.0 %"));
+    assert!(r.to_string().contains("pipeline CPU 15.0 %"));
+    assert!(r.to_string().contains("log writer 5.0 % besides"));
 }

@@ -152,10 +152,11 @@ pub fn report(summary: &RunSummary) -> String {
         };
         let r = &s.resources;
         let resources_line = format!(
-            "\ncapture → send: {latency}\nresources: pipeline CPU {:.1} % of one core (source {:.1} % \
-             besides), peak resident memory {:.1} MB, log queue at most {} items",
+            "\ncapture → send: {latency}\nresources: pipeline CPU {:.1} % of one core (source {:.1} %, \
+             log writer {:.1} % besides), peak resident memory {:.1} MB, log queue at most {} items",
             r.pipeline_cpu_pct,
             r.source_cpu_pct,
+            r.log_writer_cpu_pct,
             r.peak_rss_bytes as f64 / 1e6,
             r.max_log_queue
         );

@@ -346,6 +346,9 @@ pub(crate) struct Counters {
     pub queued: AtomicU64,
     /// The clock of the log times not taken from a frame.
     pub clock: std::sync::RwLock<crate::clock::RunClock>,
+    /// The writer thread's own CPU time so far, ns (encoding, compression,
+    /// writing), so that a run can say what its log costs.
+    pub writer_cpu_ns: AtomicU64,
 }
 
 impl Counters {
@@ -517,6 +520,12 @@ impl LogHandle {
     /// statistics: a depth that keeps growing means the disk is too slow).
     pub fn queue_depth(&self) -> u64 {
         self.shared.counters.queued.load(Ordering::Relaxed)
+    }
+
+    /// CPU time the writer thread has used so far, ns (updated after each
+    /// item it writes).
+    pub fn writer_cpu_ns(&self) -> u64 {
+        self.shared.counters.writer_cpu_ns.load(Ordering::Relaxed)
     }
 
     /// `/drogue/stats`: the run's resource figures (CPU, memory, queues);

@@ -225,6 +225,12 @@ impl Writer {
                 }
                 None => {}
             }
+            if let Ok(t) = cpu_time::ThreadTime::try_now() {
+                let ns = u64::try_from(t.as_duration().as_nanos()).unwrap_or(u64::MAX);
+                self.counters
+                    .writer_cpu_ns
+                    .store(ns, std::sync::atomic::Ordering::Relaxed);
+            }
             if Instant::now() >= next_sync {
                 self.sync();
                 self.rotate_if_due();

@@ -113,10 +113,11 @@ struct Reading {
     process_cpu_ns: u64,
     source_cpu_ns: u64,
     measure_cpu_ns: u64,
+    log_writer_cpu_ns: u64,
 }
 
 impl Reading {
-    fn now(meters: &PipelineMeters) -> Self {
+    fn now(meters: &PipelineMeters, log: &LogHandle) -> Self {
         Self {
             wall: Instant::now(),
             process_cpu_ns: ProcessTime::try_now()
@@ -124,6 +125,7 @@ impl Reading {
                 .unwrap_or(0),
             source_cpu_ns: meters.source_cpu_ns.load(Ordering::Relaxed),
             measure_cpu_ns: meters.measure_cpu_ns.load(Ordering::Relaxed),
+            log_writer_cpu_ns: log.writer_cpu_ns(),
         }
     }
 }
@@ -131,10 +133,14 @@ impl Reading {
 /// What the run's end summary reports of its resources.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct ResourceSummary {
-    /// Pipeline CPU (process less source) over the whole run, % of one core.
+    /// Pipeline CPU (the process less the source and the log writer: capture,
+    /// measurement, link) over the whole run, % of one core.
     pub pipeline_cpu_pct: f64,
     /// The source's CPU (simulator rendering, decoding), % of one core.
     pub source_cpu_pct: f64,
+    /// The log writer's CPU (frame encoding, chunk compression, writing),
+    /// % of one core.
+    pub log_writer_cpu_pct: f64,
     pub peak_rss_bytes: u64,
     /// Deepest log queue seen in a sample.
     pub max_log_queue: u64,
@@ -165,12 +171,13 @@ struct Sampler {
 
 impl Sampler {
     fn sample(&mut self) {
-        let now = Reading::now(&self.meters);
+        let now = Reading::now(&self.meters, &self.log);
         let wall = now.wall.duration_since(self.last.wall);
         let d = |a: u64, b: u64| b.saturating_sub(a);
         let process = d(self.last.process_cpu_ns, now.process_cpu_ns);
         let source = d(self.last.source_cpu_ns, now.source_cpu_ns);
         let measure = d(self.last.measure_cpu_ns, now.measure_cpu_ns);
+        let writer = d(self.last.log_writer_cpu_ns, now.log_writer_cpu_ns);
         let rss = resident_bytes();
         let log_queue = self.log.queue_depth();
         let m = &self.meters;
@@ -181,13 +188,15 @@ impl Sampler {
             "cpu_pct": {
                 "process": pct(process, wall),
                 "source": pct(source, wall),
-                "pipeline": pct(process.saturating_sub(source), wall),
+                "pipeline": pct(process.saturating_sub(source + writer), wall),
                 "measurement": pct(measure, wall),
+                "log_writer": pct(writer, wall),
             },
             "cpu_s_total": {
                 "process": now.process_cpu_ns as f64 * 1e-9,
                 "source": now.source_cpu_ns as f64 * 1e-9,
                 "measurement": now.measure_cpu_ns as f64 * 1e-9,
+                "log_writer": now.log_writer_cpu_ns as f64 * 1e-9,
             },
             "rss_bytes": rss,
             "queues": {
@@ -209,8 +218,10 @@ impl Sampler {
         let total_wall = now.wall.duration_since(self.first.wall);
         let process = d(self.first.process_cpu_ns, now.process_cpu_ns);
         let source = d(self.first.source_cpu_ns, now.source_cpu_ns);
-        self.summary.pipeline_cpu_pct = pct(process.saturating_sub(source), total_wall);
+        let writer = d(self.first.log_writer_cpu_ns, now.log_writer_cpu_ns);
+        self.summary.pipeline_cpu_pct = pct(process.saturating_sub(source + writer), total_wall);
         self.summary.source_cpu_pct = pct(source, total_wall);
+        self.summary.log_writer_cpu_pct = pct(writer, total_wall);
     }
 }
 
@@ -218,7 +229,7 @@ impl StatsThread {
     pub fn spawn(meters: Arc<PipelineMeters>, log: LogHandle, link_events: EventReceiver) -> Self {
         let stop = Arc::new((Mutex::new(false), Condvar::new()));
         let stop_flag = Arc::clone(&stop);
-        let first = Reading::now(&meters);
+        let first = Reading::now(&meters, &log);
         let mut sampler = Sampler {
             meters,
             log,

@@ -80,6 +80,9 @@ struct CpuPctLite {
 struct CpuTotalLite {
     process: f64,
     source: f64,
+    /// Absent in logs written before the writer's CPU was measured.
+    #[serde(default)]
+    log_writer: f64,
 }
 
 #[derive(Deserialize)]
@@ -92,12 +95,15 @@ struct QueuesLite {
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct ResourceReview {
     pub samples: u64,
-    /// Pipeline CPU (process less the source) over the whole run, % of one core.
+    /// Pipeline CPU (the process less the source and the log writer) over
+    /// the whole run, % of one core.
     pub pipeline_cpu_pct: f64,
     /// The busiest one-second interval, % of one core.
     pub pipeline_cpu_max_pct: f64,
     /// The source's own CPU (simulator rendering, camera decoding), % of one core.
     pub source_cpu_pct: f64,
+    /// The log writer's CPU (encoding, compression, writing), % of one core.
+    pub log_writer_cpu_pct: f64,
     pub peak_rss_bytes: u64,
     pub max_log_queue: u64,
     pub last_log_queue: u64,
@@ -458,8 +464,10 @@ fn review_into(log: &Path, out_dir: &Path) -> Result<ReviewReport, LogError> {
                 if wall_s > 0.0 {
                     let source = st.cpu_s_total.source - first.source;
                     let process = st.cpu_s_total.process - first.process;
-                    res.pipeline_cpu_pct = 100.0 * (process - source) / wall_s;
+                    let writer = st.cpu_s_total.log_writer - first.log_writer;
+                    res.pipeline_cpu_pct = 100.0 * (process - source - writer) / wall_s;
                     res.source_cpu_pct = 100.0 * source / wall_s;
+                    res.log_writer_cpu_pct = 100.0 * writer / wall_s;
                 }
                 res.pipeline_cpu_max_pct = res.pipeline_cpu_max_pct.max(st.cpu_pct.pipeline);
                 res.peak_rss_bytes = res.peak_rss_bytes.max(st.rss_bytes.unwrap_or(0));
@@ -649,11 +657,12 @@ impl fmt::Display for ReviewReport {
         if let Some(res) = &self.resources {
             writeln!(
                 f,
-                "resources  pipeline CPU {:.1} % of one core (busiest second {:.1} %), source {:.1} % besides; \
-                 peak resident memory {:.1} MB",
+                "resources  pipeline CPU {:.1} % of one core (busiest second {:.1} %), source {:.1} % and \
+                 log writer {:.1} % besides; peak resident memory {:.1} MB",
                 res.pipeline_cpu_pct,
                 res.pipeline_cpu_max_pct,
                 res.source_cpu_pct,
+                res.log_writer_cpu_pct,
                 res.peak_rss_bytes as f64 / 1e6
             )?;
             writeln!(
