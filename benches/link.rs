@@ -12,6 +12,7 @@ use drogue_vision::measure::ellipse::Ellipse;
 use drogue_vision::measure::{
     CirclePose, Detection, Disambiguation, FitQuality, Measurement, StageTimes,
 };
+use drogue_vision::spatial::{Direction, Point};
 use mavlink::{SigningConfig, SigningData};
 use nalgebra::{Matrix3, Vector3};
 use std::hint::black_box;
@@ -39,9 +40,9 @@ fn measurement() -> Measurement {
             },
             alt_pose_camera: None,
             disambiguation: Disambiguation::CanopyRim,
-            position_body_m: p,
-            normal_body: n,
-            position_from_probe_body_m: p,
+            position_body_m: Point::new(p),
+            normal_body: Direction::new(n),
+            position_from_probe_body_m: Point::new(p),
             position_cov_body_m2: Matrix3::from_diagonal(&Vector3::new(4e-4, 1e-5, 2e-5)),
             normal_sigma_rad: 0.02,
             quality: FitQuality {

@@ -20,6 +20,7 @@ use drogue_vision::measure::{
     CirclePose, Detection, Disambiguation, FitQuality, Measurement, StageTimes,
 };
 use drogue_vision::record::DetectionRecord;
+use drogue_vision::spatial::{Direction, Point};
 use nalgebra::{Matrix3, Vector3};
 use std::io::{self, Seek, SeekFrom, Write};
 use std::path::Path;
@@ -145,9 +146,9 @@ fn inputs() -> Vec<LoggedFrame> {
                     },
                     alt_pose_camera: None,
                     disambiguation: Disambiguation::CanopyRim,
-                    position_body_m: centre,
-                    normal_body: normal,
-                    position_from_probe_body_m: centre,
+                    position_body_m: Point::new(centre),
+                    normal_body: Direction::new(normal),
+                    position_from_probe_body_m: Point::new(centre),
                     position_cov_body_m2: Matrix3::identity() * 1e-4,
                     normal_sigma_rad: 0.01,
                     quality: FitQuality {

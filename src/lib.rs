@@ -18,3 +18,4 @@ pub mod pipeline;
 pub mod priority;
 pub mod record;
 pub mod source;
+pub mod spatial;

@@ -14,7 +14,7 @@ const LAYERS: &[&[&str]] = &[
     &["log"],
     &["link", "record"],
     &["measure", "image_io"],
-    &["camera", "frame", "clock", "priority"],
+    &["camera", "frame", "clock", "priority", "spatial"],
 ];
 
 fn layer_of(module: &str) -> Option<usize> {

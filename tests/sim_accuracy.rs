@@ -57,7 +57,8 @@ fn run_scenario(name: &str, skip: usize, count: usize, config_toml: &str) -> Run
         if detectable {
             // Body frame truth closes the loop through the mount as well.
             if let (Some(d), Some(e)) = (m.detection.as_ref(), errors(&m, &t)) {
-                let body_err = (d.position_body_m - common::v3(truth.position_body)).norm();
+                let body_err =
+                    (d.position_body_m.vector() - common::v3(truth.position_body)).norm();
                 assert!(
                     body_err <= (e.position_rel * e.range_m) + 1e-6,
                     "body and camera position errors disagree: {body_err} m"

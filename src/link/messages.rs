@@ -63,6 +63,7 @@
 
 use super::telemetry::VehiclePose;
 use crate::measure::{Detection, Measurement};
+use crate::spatial::{quaternion_from_wxyz, quaternion_to_wxyz};
 use mavlink::Message;
 use mavlink::dialects::ardupilotmega::{
     HEARTBEAT_DATA, LANDING_TARGET_DATA, LandingTargetType, MavAutopilot, MavBool,
@@ -201,8 +202,8 @@ fn finite3(v: &Vector3<f64>) -> bool {
 impl DroguePose {
     /// `None` for a degenerate detection (non-finite values, zero distance).
     pub fn new(det: &Detection) -> Option<Self> {
-        let p = det.position_body_m;
-        let n = det.normal_body;
+        let p = *det.position_body_m.vector();
+        let n = *det.normal_body.vector();
         if !finite3(&p) || !finite3(&n) || p.norm() <= 0.0 || n.norm() <= 0.0 {
             return None;
         }
@@ -269,8 +270,9 @@ impl DroguePose {
     }
 }
 
+/// A rotation as MAVLink's `q` (w first, f32).
 fn wxyz(q: &UnitQuaternion<f64>) -> [f32; 4] {
-    [q.w as f32, q.i as f32, q.j as f32, q.k as f32]
+    quaternion_to_wxyz(q).map(|c| c as f32)
 }
 
 fn time_usec(m: &Measurement) -> u64 {
@@ -312,12 +314,12 @@ pub fn landing_target_ned(
     det: &Detection,
     vehicle: &VehiclePose,
 ) -> Option<MavMessage> {
-    let [w, x, y, z] = vehicle.q_ned_body;
-    let q = nalgebra::Quaternion::new(w, x, y, z);
-    if !(q.coords.iter().all(|c| c.is_finite()) && q.norm() > 0.5) {
+    // The autopilot's attitude: refused unless close to a unit quaternion.
+    let norm = vehicle.q_ned_body.iter().map(|c| c * c).sum::<f64>().sqrt();
+    if norm.is_nan() || norm <= 0.5 {
         return None;
     }
-    let q_ned_body = UnitQuaternion::from_quaternion(q);
+    let q_ned_body = quaternion_from_wxyz(vehicle.q_ned_body)?;
     let vehicle_ned_m = Vector3::from(vehicle.position_ned_m);
     let target_ned_m = vehicle_ned_m + q_ned_body * pose.position_body_m;
     if !finite3(&target_ned_m) {
@@ -479,6 +481,7 @@ pub(crate) mod tests {
     use super::*;
     use crate::measure::ellipse::Ellipse;
     use crate::measure::{CirclePose, Disambiguation, FitQuality, StageTimes};
+    use crate::spatial::{Direction, Point};
     use nalgebra::Matrix3;
 
     pub(crate) fn detection(position_body_m: Vector3<f64>, normal_body: Vector3<f64>) -> Detection {
@@ -501,9 +504,9 @@ pub(crate) mod tests {
             },
             alt_pose_camera: None,
             disambiguation: Disambiguation::CanopyRim,
-            position_body_m,
-            normal_body,
-            position_from_probe_body_m: position_body_m,
+            position_body_m: Point::new(position_body_m),
+            normal_body: Direction::new(normal_body),
+            position_from_probe_body_m: Point::new(position_body_m),
             position_cov_body_m2: Matrix3::from_diagonal(&Vector3::new(1e-4, 4e-6, 9e-6)),
             normal_sigma_rad: 0.01,
             quality: FitQuality {
@@ -591,7 +594,7 @@ pub(crate) mod tests {
         let vehicle = VehiclePose {
             time_ns: m.capture_time_ns,
             position_ned_m: [100.0, 20.0, -50.0],
-            q_ned_body: [yaw90.w, yaw90.i, yaw90.j, yaw90.k],
+            q_ned_body: quaternion_to_wxyz(&yaw90),
         };
         let MavMessage::LANDING_TARGET(ned) =
             landing_target_ned(&m, &pose, &det, &vehicle).unwrap()
@@ -691,7 +694,7 @@ pub(crate) mod tests {
     fn degenerate_detections_are_refused() {
         let mut det = detection(Vector3::new(0.0, 0.0, 0.0), Vector3::new(-1.0, 0.0, 0.0));
         assert!(DroguePose::new(&det).is_none());
-        det.position_body_m = Vector3::new(f64::NAN, 0.0, 1.0);
+        det.position_body_m = Point::new(Vector3::new(f64::NAN, 0.0, 1.0));
         assert!(DroguePose::new(&det).is_none());
     }
 }

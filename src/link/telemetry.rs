@@ -250,7 +250,7 @@ impl Telemetry {
         Some(VehiclePose {
             time_ns: t,
             position_ned_m: [p.x, p.y, p.z],
-            q_ned_body: [q.w, q.i, q.j, q.k],
+            q_ned_body: crate::spatial::quaternion_to_wxyz(&q),
         })
     }
 }

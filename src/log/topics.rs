@@ -7,6 +7,7 @@ use crate::camera::CameraModel;
 use crate::frame::Frame;
 use crate::measure::mount::Mount;
 use crate::measure::{Detection, Measurement};
+use crate::spatial::{Direction, Point, quaternion_to_wxyz};
 use foxglove::messages::{
     CameraCalibration, CircleAnnotation, Color, CompressedImage, FrameTransform, FrameTransforms,
     ImageAnnotations, Log, Point2, PointsAnnotation, Pose, PoseInFrame, Quaternion, RawImage,
@@ -218,19 +219,18 @@ impl MountTransforms {
     /// Read off a [`Mount`] through its point/vector mappings (so it follows
     /// whatever the mount implements).
     pub fn from_mount(mount: &Mount) -> Self {
-        let origin = Vector3::zeros();
-        let camera_in_body_m = mount.point_camera_to_body(&origin);
-        let r_body_camera = Matrix3::from_columns(&[
-            mount.vector_camera_to_body(&Vector3::x()),
-            mount.vector_camera_to_body(&Vector3::y()),
-            mount.vector_camera_to_body(&Vector3::z()),
-        ]);
+        let camera_in_body_m = mount.point_camera_to_body(&Point::new(Vector3::zeros()));
+        let axis = |v: Vector3<f64>| *mount.vector_camera_to_body(&Direction::new(v)).vector();
+        let r_body_camera =
+            Matrix3::from_columns(&[axis(Vector3::x()), axis(Vector3::y()), axis(Vector3::z())]);
         let q = UnitQuaternion::from_matrix(&r_body_camera);
         // point_body_from_probe(p) = p - probe tip.
-        let probe_in_body_m = -mount.point_body_from_probe(&origin);
+        let probe_in_body_m = -mount
+            .point_body_from_probe(&Point::new(Vector3::zeros()))
+            .vector();
         Self {
-            camera_in_body_m: camera_in_body_m.into(),
-            q_body_camera: [q.w, q.i, q.j, q.k],
+            camera_in_body_m: camera_in_body_m.to_array(),
+            q_body_camera: quaternion_to_wxyz(&q),
             probe_in_body_m: probe_in_body_m.into(),
         }
     }

@@ -14,8 +14,9 @@ pub mod track;
 
 use crate::camera::CameraModel;
 use crate::frame::Frame;
+use crate::spatial::{BodyFrd, Direction, Point};
 use ellipse::Ellipse;
-use nalgebra::{Matrix3, Vector3};
+use nalgebra::Matrix3;
 use serde::{Deserialize, Serialize};
 use std::time::Instant;
 
@@ -80,11 +81,11 @@ pub struct Detection {
     pub alt_pose_camera: Option<CirclePose>,
     pub disambiguation: Disambiguation,
     /// Centre of the dark circle in body FRD, metres.
-    pub position_body_m: Vector3<f64>,
+    pub position_body_m: Point<BodyFrd>,
     /// Drogue normal in body FRD (unit, toward the camera).
-    pub normal_body: Vector3<f64>,
+    pub normal_body: Direction<BodyFrd>,
     /// Drogue centre relative to the probe tip, body FRD axes, metres.
-    pub position_from_probe_body_m: Vector3<f64>,
+    pub position_from_probe_body_m: Point<BodyFrd>,
     /// Covariance of `position_body_m`, square metres.
     pub position_cov_body_m2: Matrix3<f64>,
     /// One-sigma angular uncertainty of the normal, radians.
@@ -264,8 +265,10 @@ impl Measurer {
             let normal_sigma_rad = uncertainty.normal_sigma_rad;
             let position_body_m = self
                 .mount
-                .point_camera_to_body(&choice.pose.centre_camera_m);
-            let normal_body = self.mount.vector_camera_to_body(&choice.pose.normal_camera);
+                .point_camera_to_body(&Point::new(choice.pose.centre_camera_m));
+            let normal_body = self
+                .mount
+                .vector_camera_to_body(&Direction::new(choice.pose.normal_camera));
             let position_cov_body_m2 = self.mount.covariance_camera_to_body(&cov_camera);
             times.pose_us = micros_since(t);
             tracing::debug!(

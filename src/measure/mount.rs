@@ -8,6 +8,7 @@
 //! `R_body_cam = Rz(yaw) Ry(pitch) Rx(roll) R_body_cam0`. Positive pitch tilts
 //! the camera up.
 
+use crate::spatial::{BodyFrd, Camera, Direction, Point};
 use nalgebra::{Matrix3, Rotation3, UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
 
@@ -94,13 +95,13 @@ impl Mount {
     }
 
     /// A point (metres) from the camera frame into body FRD.
-    pub fn point_camera_to_body(&self, p_camera_m: &Vector3<f64>) -> Vector3<f64> {
-        self.q_body_camera * p_camera_m + self.camera_position_body_m
+    pub fn point_camera_to_body(&self, p: &Point<Camera>) -> Point<BodyFrd> {
+        Point::new(self.q_body_camera * p.vector() + self.camera_position_body_m)
     }
 
     /// A direction from the camera frame into body FRD (no translation).
-    pub fn vector_camera_to_body(&self, v_camera: &Vector3<f64>) -> Vector3<f64> {
-        self.q_body_camera * v_camera
+    pub fn vector_camera_to_body(&self, v: &Direction<Camera>) -> Direction<BodyFrd> {
+        Direction::new(self.q_body_camera * v.vector())
     }
 
     /// A position covariance from camera axes into body axes: `R C R^T`.
@@ -110,8 +111,8 @@ impl Mount {
     }
 
     /// A body-FRD point relative to the probe tip (body axes, metres).
-    pub fn point_body_from_probe(&self, p_body_m: &Vector3<f64>) -> Vector3<f64> {
-        p_body_m - self.probe_tip_body_m
+    pub fn point_body_from_probe(&self, p: &Point<BodyFrd>) -> Point<BodyFrd> {
+        Point::new(p.vector() - self.probe_tip_body_m)
     }
 }
 
@@ -138,19 +139,19 @@ mod tests {
         let m = Mount::from_config(&config([1.0, 0.0, -0.5], 0.0, 0.0, 0.0)).unwrap();
         // Optical axis -> forward, image right -> right, image down -> down.
         assert!(close(
-            &m.vector_camera_to_body(&Vector3::z()),
+            &m.vector_camera_to_body(&Direction::new(Vector3::z())),
             &Vector3::x()
         ));
         assert!(close(
-            &m.vector_camera_to_body(&Vector3::x()),
+            &m.vector_camera_to_body(&Direction::new(Vector3::x())),
             &Vector3::y()
         ));
         assert!(close(
-            &m.vector_camera_to_body(&Vector3::y()),
+            &m.vector_camera_to_body(&Direction::new(Vector3::y())),
             &Vector3::z()
         ));
         // A point 10 m ahead on the optical axis, 1 m right in the image.
-        let p = m.point_camera_to_body(&Vector3::new(1.0, 0.0, 10.0));
+        let p = *m.point_camera_to_body(&Point::new(Vector3::new(1.0, 0.0, 10.0)));
         assert!(close(&p, &Vector3::new(11.0, 1.0, -0.5)));
     }
 
@@ -159,15 +160,15 @@ mod tests {
         let m = Mount::from_config(&config([0.0; 3], 0.0, 0.0, 90.0)).unwrap();
         // Optical axis -> body right; image right -> body aft; image down -> down.
         assert!(close(
-            &m.vector_camera_to_body(&Vector3::z()),
+            &m.vector_camera_to_body(&Direction::new(Vector3::z())),
             &Vector3::y()
         ));
         assert!(close(
-            &m.vector_camera_to_body(&Vector3::x()),
+            &m.vector_camera_to_body(&Direction::new(Vector3::x())),
             &-Vector3::x()
         ));
         assert!(close(
-            &m.vector_camera_to_body(&Vector3::y()),
+            &m.vector_camera_to_body(&Direction::new(Vector3::y())),
             &Vector3::z()
         ));
     }
@@ -178,16 +179,16 @@ mod tests {
         let (s, c) = 30f64.to_radians().sin_cos();
         // Forward and up (FRD: up is -z).
         assert!(close(
-            &m.vector_camera_to_body(&Vector3::z()),
+            &m.vector_camera_to_body(&Direction::new(Vector3::z())),
             &Vector3::new(c, 0.0, -s)
         ));
         // Image down tilts forward-down, image right stays right.
         assert!(close(
-            &m.vector_camera_to_body(&Vector3::y()),
+            &m.vector_camera_to_body(&Direction::new(Vector3::y())),
             &Vector3::new(s, 0.0, c)
         ));
         assert!(close(
-            &m.vector_camera_to_body(&Vector3::x()),
+            &m.vector_camera_to_body(&Direction::new(Vector3::x())),
             &Vector3::y()
         ));
     }
@@ -197,15 +198,15 @@ mod tests {
         let m = Mount::from_config(&config([0.0; 3], 90.0, 0.0, 0.0)).unwrap();
         // Rolled right by 90 deg: image right -> body down, image down -> body left.
         assert!(close(
-            &m.vector_camera_to_body(&Vector3::x()),
+            &m.vector_camera_to_body(&Direction::new(Vector3::x())),
             &Vector3::z()
         ));
         assert!(close(
-            &m.vector_camera_to_body(&Vector3::y()),
+            &m.vector_camera_to_body(&Direction::new(Vector3::y())),
             &-Vector3::y()
         ));
         assert!(close(
-            &m.vector_camera_to_body(&Vector3::z()),
+            &m.vector_camera_to_body(&Direction::new(Vector3::z())),
             &Vector3::x()
         ));
     }
@@ -224,7 +225,7 @@ mod tests {
     #[test]
     fn probe_offset() {
         let m = Mount::from_config(&config([0.0; 3], 0.0, 0.0, 0.0)).unwrap();
-        let d = m.point_body_from_probe(&Vector3::new(12.0, 0.5, -0.3));
+        let d = *m.point_body_from_probe(&Point::new(Vector3::new(12.0, 0.5, -0.3)));
         assert!(close(&d, &Vector3::new(10.0, 0.0, 0.0)));
     }
 

@@ -4,9 +4,10 @@ use super::{Captured, FrameSource, SourceError, SourceItem};
 use crate::camera::CameraModel;
 use crate::frame::{Frame, FrameOrigin};
 use crate::measure::mount::MountConfig;
+use crate::spatial::{quaternion_from_wxyz, quaternion_to_wxyz};
 use drogue_sim::trajectory::World;
 use drogue_sim::{MountSpec, NED_FRAME_AUTOPILOT, Scenario, Simulator};
-use nalgebra::{Quaternion, Rotation3, UnitQuaternion, Vector3};
+use nalgebra::{Rotation3, UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
 
 /// The simulator's camera mount in the config's terms (both use the mount
@@ -168,7 +169,7 @@ impl AutopilotAnchor {
         position_autopilot_m: [f64; 3],
         q_autopilot_body: [f64; 4],
     ) -> Option<Self> {
-        let q_ap = unit_quaternion(q_autopilot_body)?;
+        let q_ap = quaternion_from_wxyz(q_autopilot_body)?;
         if !position_autopilot_m.iter().all(|v| v.is_finite()) {
             return None;
         }
@@ -210,8 +211,8 @@ impl AutopilotAnchor {
         let r = self.q_world_autopilot();
         let p = r * (Vector3::from(position_autopilot_m) - Vector3::from(self.origin_autopilot_m))
             + self.moved_origin_world(t_s);
-        let q = unit_quaternion(q_autopilot_body)
-            .map(|q| wxyz(&(r * q)))
+        let q = quaternion_from_wxyz(q_autopilot_body)
+            .map(|q| quaternion_to_wxyz(&(r * q)))
             .unwrap_or([0.0; 4]);
         (p.into(), q)
     }
@@ -229,21 +230,12 @@ impl AutopilotAnchor {
         truth.position_ned = self.position_to_autopilot(truth.position_ned, truth.t);
         truth.receiver_position_ned =
             self.position_to_autopilot(truth.receiver_position_ned, truth.t);
-        if let Some(q) = unit_quaternion(truth.receiver_q_ned_body) {
-            truth.receiver_q_ned_body = wxyz(&(self.q_world_autopilot().inverse() * q));
+        if let Some(q) = quaternion_from_wxyz(truth.receiver_q_ned_body) {
+            truth.receiver_q_ned_body =
+                quaternion_to_wxyz(&(self.q_world_autopilot().inverse() * q));
         }
         truth.ned_frame = NED_FRAME_AUTOPILOT.into();
     }
-}
-
-fn unit_quaternion(q: [f64; 4]) -> Option<UnitQuaternion<f64>> {
-    let q = Quaternion::new(q[0], q[1], q[2], q[3]);
-    (q.coords.iter().all(|c| c.is_finite()) && q.norm() > 1e-9)
-        .then(|| UnitQuaternion::from_quaternion(q))
-}
-
-fn wxyz(q: &UnitQuaternion<f64>) -> [f64; 4] {
-    [q.w, q.i, q.j, q.k]
 }
 
 fn wrap_pi(a: f64) -> f64 {
@@ -298,7 +290,7 @@ mod tests {
     use super::*;
 
     fn yaw_q(yaw: f64) -> [f64; 4] {
-        wxyz(&UnitQuaternion::from_euler_angles(0.01, -0.02, yaw))
+        quaternion_to_wxyz(&UnitQuaternion::from_euler_angles(0.01, -0.02, yaw))
     }
 
     fn close(a: [f64; 3], b: [f64; 3], tol: f64) -> bool {
@@ -317,7 +309,7 @@ mod tests {
         assert!(close(p, start.receiver_ned.into(), 1e-9));
         // Heading: the scripted receiver's (tanker heading + trim yaw 0);
         // roll and pitch: the autopilot's own.
-        let (r, pi, y) = unit_quaternion(q).unwrap().euler_angles();
+        let (r, pi, y) = quaternion_from_wxyz(q).unwrap().euler_angles();
         assert!((y - 40f64.to_radians()).abs() < 1e-9, "{y}");
         assert!((r - 0.01).abs() < 1e-9 && (pi + 0.02).abs() < 1e-9);
         // One metre ahead of the vehicle (its heading) is one metre ahead of
@@ -377,12 +369,12 @@ mod tests {
         assert_eq!(t.ned_frame, NED_FRAME_AUTOPILOT);
         assert_eq!(t.capture_time_ns, capture);
         assert!(close(t.receiver_position_ned, p0, 1e-9));
-        let dq = unit_quaternion(t.receiver_q_ned_body)
+        let dq = quaternion_from_wxyz(t.receiver_q_ned_body)
             .unwrap()
-            .angle_to(&unit_quaternion(q0).unwrap());
+            .angle_to(&quaternion_from_wxyz(q0).unwrap());
         assert!(dq < 1e-9);
         // The body-frame truth does not depend on the frame of the NED fields.
-        let q = unit_quaternion(q0).unwrap();
+        let q = quaternion_from_wxyz(q0).unwrap();
         let body = q.inverse() * (Vector3::from(t.position_ned) - Vector3::from(p0));
         assert!(close(body.into(), t.position_body, 1e-9));
         assert_eq!(

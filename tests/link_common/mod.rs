@@ -9,6 +9,7 @@ use drogue_vision::measure::ellipse::Ellipse;
 use drogue_vision::measure::{
     CirclePose, Detection, Disambiguation, FitQuality, Measurement, StageTimes,
 };
+use drogue_vision::spatial::{Direction, Point};
 use mavlink::dialects::ardupilotmega::{
     ATTITUDE_DATA, HEARTBEAT_DATA, LOCAL_POSITION_NED_DATA, MavAutopilot, MavMessage, MavModeFlag,
     MavState, MavType,
@@ -58,9 +59,9 @@ pub fn detection(position_body_m: [f64; 3], normal_body: [f64; 3], epoch: u32) -
         },
         alt_pose_camera: None,
         disambiguation: Disambiguation::CanopyRim,
-        position_body_m: p,
-        normal_body: n,
-        position_from_probe_body_m: p,
+        position_body_m: Point::new(p),
+        normal_body: Direction::new(n),
+        position_from_probe_body_m: Point::new(p),
         position_cov_body_m2: Matrix3::from_diagonal(&Vector3::new(4e-4, 1e-5, 2e-5)),
         normal_sigma_rad: 0.02,
         quality: FitQuality {

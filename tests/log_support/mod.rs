@@ -13,6 +13,7 @@ use drogue_vision::measure::{
     CirclePose, Detection, Disambiguation, FitQuality, Measurement, StageTimes,
 };
 use drogue_vision::record::DetectionRecord;
+use drogue_vision::spatial::{Direction, Point};
 use image::GrayImage;
 use nalgebra::{Matrix3, Vector3};
 
@@ -145,9 +146,13 @@ pub fn measurement(seq: u64) -> Measurement {
             },
             alt_pose_camera: None,
             disambiguation: Disambiguation::CanopyRim,
-            position_body_m: Vector3::new(centre.z, centre.x, centre.y),
-            normal_body: Vector3::new(normal.z, normal.x, normal.y),
-            position_from_probe_body_m: Vector3::new(centre.z - 1.0, centre.x, centre.y),
+            position_body_m: Point::new(Vector3::new(centre.z, centre.x, centre.y)),
+            normal_body: Direction::new(Vector3::new(normal.z, normal.x, normal.y)),
+            position_from_probe_body_m: Point::new(Vector3::new(
+                centre.z - 1.0,
+                centre.x,
+                centre.y,
+            )),
             position_cov_body_m2: Matrix3::identity() * 1e-4,
             normal_sigma_rad: 0.01,
             quality: FitQuality {
