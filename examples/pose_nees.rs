@@ -3,14 +3,17 @@
 //! (unrelated views with exact truth) and simulator scenario runs.
 //!
 //! `cargo run --release --example pose_nees -- [--reference DIR] [--sim-frames N]
-//! [--seed S] [--only TEXT] [--scenario-frames N] [--worst K] [--scale F]`
+//! [--seed S] [--only TEXT] [--scenario-frames N] [--worst K] [--scale F] [--against-truth]`
 //!
 //! `--reference` defaults to `$DROGUE_REFERENCE_DIR` (sets skipped when
 //! neither is given); `--sim-frames` per sweep level (default 20, 0: none);
 //! `--only` keeps the sets whose name contains TEXT; `--scenario-frames`
 //! per scenario (approach, station_keeping; default 0: none); `--worst K`
 //! lists each set's K largest NEES frames; `--scale F` also prints each set
-//! with its standard deviations times F (`[link] target_relative_std_scale`).
+//! with its standard deviations times F (`[link] target_relative_std_scale`);
+//! `--against-truth` scores the reference sets against the true centre
+//! also where the solution given is the mirror's (by default against the
+//! centre of the solution given).
 
 #[path = "../tests/nees/mod.rs"]
 mod nees;
@@ -21,7 +24,7 @@ use std::path::PathBuf;
 
 fn usage(message: &str) -> ! {
     eprintln!(
-        "{message}\nusage: pose_nees [--reference DIR] [--sim-frames N] [--seed S] [--only TEXT] [--scenario-frames N] [--worst K] [--scale F]"
+        "{message}\nusage: pose_nees [--reference DIR] [--sim-frames N] [--seed S] [--only TEXT] [--scenario-frames N] [--worst K] [--scale F] [--against-truth]"
     );
     std::process::exit(2)
 }
@@ -56,6 +59,7 @@ fn main() {
         (20u64, nees::SEED, 0usize, 0usize);
     let mut only: Option<String> = None;
     let mut scale = 1.0;
+    let mut against_truth = false;
     let mut args = std::env::args().skip(1);
     while let Some(arg) = args.next() {
         let mut value = |name: &str| {
@@ -81,6 +85,7 @@ fn main() {
                     .unwrap_or_else(|| usage("--scale: a number >= 1"))
             }
             "--only" => only = Some(value("--only")),
+            "--against-truth" => against_truth = true,
             other => usage(&format!("unknown argument {other}")),
         }
     }
@@ -98,7 +103,11 @@ fn main() {
             "hard_c",
         ] {
             if wanted(name) {
-                print(&nees::reference_set(dir, name), worst, scale);
+                print(
+                    &nees::reference_set_scored(dir, name, against_truth),
+                    worst,
+                    scale,
+                );
             }
         }
     }

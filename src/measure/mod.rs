@@ -251,6 +251,14 @@ impl Measurer {
                 &inlier_points,
                 inlier_widths.as_deref(),
             );
+            // Unresolved: the answer given may be the mirror one, and what
+            // is sent with it must cover that.
+            let uncertainty = match (choice.how, &choice.alternative) {
+                (Disambiguation::Unresolved, Some(other)) => {
+                    pose::with_unresolved_mirror(uncertainty, &choice.pose, other)
+                }
+                _ => uncertainty,
+            };
             let cov_camera = uncertainty.position_cov_camera_m2;
             let normal_sigma_rad = uncertainty.normal_sigma_rad;
             let position_body_m = self

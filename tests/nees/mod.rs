@@ -69,6 +69,10 @@ pub struct SetNees {
     /// covariance is that of the ellipse; which branch is right is the
     /// disambiguation's to say, reported apart).
     pub wrong_branch: usize,
+    /// Score every frame against the true centre, also when the solution
+    /// given is the mirror's (the error PX4 gets when the ambiguity is
+    /// settled wrongly).
+    pub against_truth: bool,
 }
 
 /// The q-quantile (0..1), linear between order statistics; NaN for none.
@@ -164,7 +168,7 @@ impl SetNees {
         let angle = |a: &Vector3<f64>, b: &Vector3<f64>| a.cross(b).norm().atan2(a.dot(b));
         let wrong = angle(&n, &alt_normal) < angle(&n, &true_normal);
         self.wrong_branch += usize::from(wrong);
-        let centre = if wrong {
+        let centre = if wrong && !self.against_truth {
             alt_centre
         } else {
             true_centre_camera
@@ -216,6 +220,12 @@ fn v3(v: &Value) -> Option<Vector3<f64>> {
 /// forgotten before each). Panics when the set is missing: a run on purpose
 /// must never pass without measuring.
 pub fn reference_set(dir: &Path, name: &str) -> SetNees {
+    reference_set_scored(dir, name, false)
+}
+
+/// [`reference_set`], scored against the true centre also where the
+/// solution given is the mirror's when `against_truth`.
+pub fn reference_set_scored(dir: &Path, name: &str, against_truth: bool) -> SetNees {
     let set = dir.join(name);
     let truth = std::fs::read_to_string(set.join("truth.jsonl"))
         .unwrap_or_else(|e| panic!("{}: {e}", set.join("truth.jsonl").display()));
@@ -223,6 +233,7 @@ pub fn reference_set(dir: &Path, name: &str) -> SetNees {
     let mut measurer = Measurer::new(camera, &Config::embedded()).expect("measurer");
     let mut out = SetNees {
         name: name.to_string(),
+        against_truth,
         ..Default::default()
     };
     for (seq, line) in truth.lines().filter(|l| !l.trim().is_empty()).enumerate() {
