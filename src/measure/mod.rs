@@ -253,14 +253,35 @@ impl Measurer {
                 .filter(|(_, keep)| **keep)
                 .map(|(p, _)| *p)
                 .collect();
-            let uncertainty = pose::pose_uncertainty(
+            // Step widths of the same points (the detector measured them
+            // along with the points; an absent or mismatched list leaves
+            // the covariance without its systematic term).
+            let inlier_widths: Option<Vec<f64>> =
+                (cand.rim_step_widths_px.len() == undistorted.len()).then(|| {
+                    cand.rim_step_widths_px
+                        .iter()
+                        .zip(&fitted.inliers)
+                        .filter(|(_, keep)| **keep)
+                        .map(|(w, _)| *w)
+                        .collect()
+                });
+            let uncertainty = pose::pose_uncertainty_with_edges(
                 &fitted.ellipse,
                 &self.camera,
                 &choice.pose,
                 self.inner_radius_m,
                 &quality,
                 &inlier_points,
+                inlier_widths.as_deref(),
             );
+            // Unresolved: the answer given may be the mirror one, and what
+            // is sent with it must cover that.
+            let uncertainty = match (choice.how, &choice.alternative) {
+                (Disambiguation::Unresolved, Some(other)) => {
+                    pose::with_unresolved_mirror(uncertainty, &choice.pose, other)
+                }
+                _ => uncertainty,
+            };
             let cov_camera = uncertainty.position_cov_camera_m2;
             let normal_sigma_rad = uncertainty.normal_sigma_rad;
             let position_body_m = self

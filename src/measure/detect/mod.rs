@@ -94,6 +94,11 @@ pub struct RimCandidate {
     /// The detector's own quick ellipse of the rim, undistorted pixels: a
     /// starting point, not the measurement (that is the fit module's).
     pub ellipse_px: Ellipse,
+    /// Width of each rim point's step (the blurred edge's ramp, pixels),
+    /// aligned with `rim_points_px`: the pose covariance's systematic term
+    /// (a blurred edge's mid-level crossing is only as sure as the levels
+    /// on either side, which a ramp that wide mixes).
+    pub rim_step_widths_px: Vec<f64>,
 }
 
 /// Rim ray spacing while candidates are compared, in multiples of the
@@ -244,6 +249,8 @@ struct Verified {
     score: f64,
     /// Median gray-level step across the rim.
     rim_contrast: f64,
+    /// Step width of each of `points_px`, pixels.
+    step_widths_px: Vec<f64>,
 }
 
 /// Why a candidate was not kept: shown by `RUST_LOG=debug` (the
@@ -1070,12 +1077,19 @@ impl Detector {
                 .map(|(p, _)| p)
                 .collect()
         };
+        let step_widths_px = step_widths_px
+            .into_iter()
+            .zip(&residuals)
+            .filter(|(_, r)| **r <= keep)
+            .map(|(w, _)| w)
+            .collect();
         Ok(Verified {
             ellipse,
             points_px: near(points_px),
             undistorted: near(undistorted),
             score,
             rim_contrast,
+            step_widths_px,
         })
     }
 }
@@ -1087,6 +1101,7 @@ impl Verified {
             rim_points_undistorted_px: self.undistorted,
             score: self.score,
             ellipse_px: self.ellipse,
+            rim_step_widths_px: self.step_widths_px,
         }
     }
 }
