@@ -179,7 +179,8 @@ impl SetNees {
             self.gross += 1;
             return;
         }
-        let e = measurer.mount().vector_camera_to_body(&e_camera);
+        // A displacement: rotated into body axes, no translation.
+        let e = measurer.mount().q_body_camera() * e_camera;
         let c: Matrix3<f64> = d.position_cov_body_m2;
         let Some(nees) = c
             .cholesky()
@@ -189,9 +190,7 @@ impl SetNees {
             self.no_covariance += 1;
             return;
         };
-        let u = measurer
-            .mount()
-            .vector_camera_to_body(&true_centre_camera.normalize());
+        let u = measurer.mount().q_body_camera() * true_centre_camera.normalize();
         let along = e.dot(&u);
         let lateral = e - u * along;
         let lateral_dir = lateral.try_normalize(1e-15).unwrap_or(u);
@@ -230,7 +229,7 @@ pub fn reference_set_scored(dir: &Path, name: &str, against_truth: bool) -> SetN
     let truth = std::fs::read_to_string(set.join("truth.jsonl"))
         .unwrap_or_else(|e| panic!("{}: {e}", set.join("truth.jsonl").display()));
     let camera = CameraModel::load(&set.join("camera.yaml")).expect("camera.yaml");
-    let mut measurer = Measurer::new(camera, &Config::embedded()).expect("measurer");
+    let mut measurer = Measurer::new(camera, &Config::embedded().measure()).expect("measurer");
     let mut out = SetNees {
         name: name.to_string(),
         against_truth,
@@ -299,8 +298,8 @@ pub fn sweep_level(sweep: &mut Sweep, level: &Level, frames: u64) -> SetNees {
         {
             Some(i) => i,
             None => {
-                let m =
-                    Measurer::new(camera_model(&f.camera), &Config::embedded()).expect("measurer");
+                let m = Measurer::new(camera_model(&f.camera), &Config::embedded().measure())
+                    .expect("measurer");
                 measurers.push((f.camera.distortion, m));
                 measurers.len() - 1
             }
@@ -342,7 +341,7 @@ pub fn scenario(name: &str, skip: usize, count: usize) -> SetNees {
     config.drogue.inner_radius_m = sim.inner_radius_m();
     config.drogue.canopy_radius_m = sim.canopy_radius_m();
     let camera = drogue_vision::source::sim::camera_model(&sim).expect("camera");
-    let mut measurer = Measurer::new(camera, &config).expect("measurer");
+    let mut measurer = Measurer::new(camera, &config.measure()).expect("measurer");
     let mut out = SetNees {
         name: format!("sim scenario {name} {skip}-{}", skip + count),
         ..Default::default()
