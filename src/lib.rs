@@ -16,3 +16,6 @@ pub mod measure;
 pub mod priority;
 pub mod record;
 pub mod source;
+/// Shared test fixtures; see the module docs for how the feature is enabled.
+#[cfg(any(test, feature = "testing"))]
+pub mod testing;
