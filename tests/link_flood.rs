@@ -16,14 +16,6 @@ use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::thread::sleep;
 use std::time::{Duration, Instant};
 
-fn free_udp_port() -> u16 {
-    UdpSocket::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port()
-}
-
 /// Garbage from another port, a while: one byte, 0xFE runs, a frame with a
 /// bad CRC and a truncated one; none of it may take the peer.
 fn send_garbage(to: std::net::SocketAddr, extra: &[Vec<u8>]) -> UdpSocket {

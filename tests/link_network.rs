@@ -12,7 +12,6 @@ use mavlink::dialects::ardupilotmega::{
 };
 use mavlink::{MavlinkVersion, SigningConfig, SigningData};
 use sha2::{Digest, Sha256};
-use std::io::Read;
 use std::net::{TcpListener, UdpSocket};
 use std::thread::sleep;
 use std::time::{Duration, Instant};
@@ -408,15 +407,6 @@ fn udp_garbage_and_a_flood_are_counted_and_do_not_harm_the_stream() {
     link.shutdown();
 }
 
-/// A loopback port nobody listens on (bound, then released).
-fn free_udp_port() -> u16 {
-    UdpSocket::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port()
-}
-
 #[test]
 fn udpout_keeps_sending_with_nobody_listening() {
     let rt = runtime();
@@ -462,22 +452,12 @@ fn tcp_collect(
     stream: &mut std::net::TcpStream,
     bytes: &mut Vec<u8>,
     limit: Duration,
-    mut done: impl FnMut(&[MavMessage]) -> bool,
+    done: impl FnMut(&[MavMessage]) -> bool,
 ) -> Vec<MavMessage> {
     stream
         .set_read_timeout(Some(Duration::from_millis(20)))
         .unwrap();
-    let end = Instant::now() + limit;
-    let mut buf = [0u8; 4096];
-    loop {
-        let msgs: Vec<MavMessage> = parse_all(bytes, None).into_iter().map(|m| m.1).collect();
-        if done(&msgs) || Instant::now() > end {
-            return msgs;
-        }
-        if let Ok(n) = stream.read(&mut buf) {
-            bytes.extend_from_slice(&buf[..n]);
-        }
-    }
+    collect_stream(stream, bytes, limit, done)
 }
 
 fn accept_within(listener: &TcpListener, limit: Duration) -> Option<std::net::TcpStream> {
@@ -491,15 +471,6 @@ fn accept_within(listener: &TcpListener, limit: Duration) -> Option<std::net::Tc
         sleep(Duration::from_millis(5));
     }
     None
-}
-
-fn lt_times(msgs: &[MavMessage]) -> Vec<u64> {
-    msgs.iter()
-        .filter_map(|m| match m {
-            MavMessage::LANDING_TARGET(l) => Some(l.time_usec),
-            _ => None,
-        })
-        .collect()
 }
 
 #[test]
@@ -522,7 +493,7 @@ fn tcp_poses_flow_and_survive_a_peer_restart() {
     link.submit(measurement(1, capture, Some(det)));
     let mut bytes = Vec::new();
     let msgs = tcp_collect(&mut stream, &mut bytes, Duration::from_secs(2), |m| {
-        !lt_times(m).is_empty()
+        !landing_target_times(m).is_empty()
     });
     let lt = msgs
         .iter()
@@ -566,10 +537,10 @@ fn tcp_poses_flow_and_survive_a_peer_restart() {
     ));
     let mut bytes = Vec::new();
     let msgs = tcp_collect(&mut stream, &mut bytes, Duration::from_secs(2), |m| {
-        lt_times(m).contains(&(capture2 / 1000))
+        landing_target_times(m).contains(&(capture2 / 1000))
             && m.iter().any(|x| matches!(x, MavMessage::HEARTBEAT(_)))
     });
-    let times = lt_times(&msgs);
+    let times = landing_target_times(&msgs);
     assert!(
         times.contains(&(capture2 / 1000)),
         "no pose after reconnect"

@@ -4,9 +4,9 @@
 //! `mcap` crate's stream reader.
 #![allow(dead_code)]
 
+use drogue_vision::testing;
 use mavlink::dialects::ardupilotmega::{
-    ATTITUDE_DATA, HEARTBEAT_DATA, LANDING_TARGET_DATA, LOCAL_POSITION_NED_DATA, MavAutopilot,
-    MavMessage, MavModeFlag, MavState, MavType, TIMESYNC_DATA,
+    ATTITUDE_DATA, LANDING_TARGET_DATA, LOCAL_POSITION_NED_DATA, MavMessage, TIMESYNC_DATA,
 };
 use mavlink::{MavHeader, MavlinkVersion};
 use std::net::{SocketAddr, UdpSocket};
@@ -15,16 +15,13 @@ use std::process::{Child, Command, Stdio};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
-use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
+use std::time::{Duration, Instant};
 
 pub const BIN: &str = env!("CARGO_BIN_EXE_drogue-vision");
 
-pub fn unix_now_ns() -> u64 {
-    SystemTime::now()
-        .duration_since(UNIX_EPOCH)
-        .unwrap()
-        .as_nanos() as u64
-}
+// Not every test uses every helper (as `dead_code` above).
+#[allow(unused_imports)]
+pub use drogue_vision::clock::unix_now_ns;
 
 /// The vehicle's pose as the scripted autopilot reports it: LOCAL_POSITION_NED
 /// (metres) and ATTITUDE (roll, pitch, yaw, radians), in the f32 the wire
@@ -150,14 +147,7 @@ fn peer_loop(
         let now = Instant::now();
         if now >= next_heartbeat {
             next_heartbeat += Duration::from_secs(1);
-            out.push(MavMessage::HEARTBEAT(HEARTBEAT_DATA {
-                custom_mode: 0,
-                mavtype: MavType::MAV_TYPE_QUADROTOR,
-                autopilot: MavAutopilot::MAV_AUTOPILOT_ARDUPILOTMEGA,
-                base_mode: MavModeFlag::empty(),
-                system_status: MavState::MAV_STATE_ACTIVE,
-                mavlink_version: 3,
-            }));
+            out.push(testing::autopilot_heartbeat(0));
         }
         if now >= next_telemetry {
             next_telemetry += period;
