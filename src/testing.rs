@@ -27,7 +27,8 @@ use drogue_sim::camera::SimCamera;
 use drogue_sim::{FrameTruth, TruthEllipse};
 use image::GrayImage;
 use mavlink::dialects::ardupilotmega::{
-    HEARTBEAT_DATA, MavAutopilot, MavMessage, MavModeFlag, MavState, MavType,
+    ATTITUDE_DATA, HEARTBEAT_DATA, LOCAL_POSITION_NED_DATA, MavAutopilot, MavMessage, MavModeFlag,
+    MavState, MavType,
 };
 use nalgebra::{Matrix3, Vector3};
 use std::path::{Path, PathBuf};
@@ -299,4 +300,32 @@ pub fn autopilot_heartbeat(custom_mode: u32) -> MavMessage {
         MavAutopilot::MAV_AUTOPILOT_ARDUPILOTMEGA,
         custom_mode,
     )
+}
+
+/// ATTITUDE at `time_boot_ms` (the sender's boot clock) with roll, pitch
+/// and yaw in radians, not turning.
+pub fn attitude(time_boot_ms: u32, [roll, pitch, yaw]: [f32; 3]) -> MavMessage {
+    MavMessage::ATTITUDE(ATTITUDE_DATA {
+        time_boot_ms,
+        roll,
+        pitch,
+        yaw,
+        rollspeed: 0.0,
+        pitchspeed: 0.0,
+        yawspeed: 0.0,
+    })
+}
+
+/// LOCAL_POSITION_NED at `time_boot_ms` (the sender's boot clock), metres,
+/// at rest.
+pub fn local_position_ned(time_boot_ms: u32, [x, y, z]: [f32; 3]) -> MavMessage {
+    MavMessage::LOCAL_POSITION_NED(LOCAL_POSITION_NED_DATA {
+        time_boot_ms,
+        x,
+        y,
+        z,
+        vx: 0.0,
+        vy: 0.0,
+        vz: 0.0,
+    })
 }

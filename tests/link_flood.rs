@@ -72,12 +72,7 @@ fn udpin_keeps_the_autopilot_while_garbage_arrives_from_another_port() {
     assert!(introduce(&mut autopilot, None));
 
     let attacker = send_garbage(to, &[]);
-    let capture = unix_now_ns();
-    link.submit(measurement(
-        1,
-        capture,
-        Some(detection([6.0, 0.0, 0.0], [-1.0, 0.0, 0.0], 1)),
-    ));
+    let capture = submit_ahead(&link, 1, 6.0, 1);
     let got = autopilot.collect_until(Duration::from_secs(2), |g| !landing_targets(g).is_empty());
     assert_eq!(landing_targets(&got)[0].time_usec, capture / 1000);
     assert!(

@@ -419,12 +419,7 @@ fn udpout_keeps_sending_with_nobody_listening() {
     // Someone starts listening: heartbeats and poses arrive.
     let mut peer = UdpPeer::on(UdpSocket::bind(("127.0.0.1", port)).unwrap());
     peer.wait_for_link();
-    let capture = unix_now_ns();
-    link.submit(measurement(
-        1,
-        capture,
-        Some(detection([5.0, 0.0, 0.0], [-1.0, 0.0, 0.0], 1)),
-    ));
+    let capture = submit_ahead(&link, 1, 5.0, 1);
     let got = peer.collect_until(Duration::from_secs(2), |g| !landing_targets(g).is_empty());
     assert_eq!(landing_targets(&got)[0].time_usec, capture / 1000);
     link.shutdown();
@@ -517,24 +512,14 @@ fn tcp_poses_flow_and_survive_a_peer_restart() {
     drop(stream);
     drop(listener);
     sleep(Duration::from_millis(100));
-    let old_capture = unix_now_ns();
-    link.submit(measurement(
-        2,
-        old_capture,
-        Some(detection([9.0, 0.0, 0.0], [-1.0, 0.0, 0.0], 1)),
-    ));
+    let old_capture = submit_ahead(&link, 2, 9.0, 1);
     sleep(Duration::from_millis(600));
     let listener = TcpListener::bind(("127.0.0.1", port)).unwrap();
     let back = Instant::now();
     let mut stream = accept_within(&listener, Duration::from_secs(3)).expect("link reconnects");
     let reconnect_s = back.elapsed().as_secs_f64();
     assert!(reconnect_s < 1.5, "reconnected after {reconnect_s:.2} s");
-    let capture2 = unix_now_ns();
-    link.submit(measurement(
-        3,
-        capture2,
-        Some(detection([8.0, 0.0, 0.0], [-1.0, 0.0, 0.0], 2)),
-    ));
+    let capture2 = submit_ahead(&link, 3, 8.0, 2);
     let mut bytes = Vec::new();
     let msgs = tcp_collect(&mut stream, &mut bytes, Duration::from_secs(2), |m| {
         landing_target_times(m).contains(&(capture2 / 1000))

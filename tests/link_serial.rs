@@ -149,12 +149,7 @@ fn serial_garbage_does_not_stop_the_stream() {
     let s = link.stats();
     assert!(s.bad_bytes >= 5000, "{s:?}");
     assert!(s.last_heartbeat_age_s >= 0.0, "{s:?}");
-    let capture = unix_now_ns();
-    link.submit(measurement(
-        1,
-        capture,
-        Some(detection([4.0, 0.0, 0.0], [-1.0, 0.0, 0.0], 1)),
-    ));
+    let capture = submit_ahead(&link, 1, 4.0, 1);
     let mut bytes = Vec::new();
     let msgs = collect_stream(&mut master, &mut bytes, Duration::from_secs(2), |m| {
         !landing_target_times(m).is_empty()

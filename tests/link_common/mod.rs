@@ -5,10 +5,10 @@
 #![allow(dead_code)]
 
 use drogue_vision::config::Config;
-use drogue_vision::link::LinkConfig;
+use drogue_vision::link::{LinkConfig, LinkHandle};
 use drogue_vision::measure::{Detection, Measurement};
 use drogue_vision::testing;
-use mavlink::dialects::ardupilotmega::{ATTITUDE_DATA, LOCAL_POSITION_NED_DATA, MavMessage};
+use mavlink::dialects::ardupilotmega::MavMessage;
 use mavlink::{MavHeader, MavlinkVersion, SigningData};
 use std::io::Read;
 use std::net::{SocketAddr, TcpListener, UdpSocket};
@@ -39,6 +39,15 @@ pub fn measurement(
 /// An ArduPilot quadrotor's HEARTBEAT (flight mode 4, GUIDED).
 pub fn autopilot_heartbeat() -> MavMessage {
     testing::autopilot_heartbeat(4)
+}
+
+/// Submits a detection `range_m` straight ahead, its axis back at the
+/// vehicle, captured now; returns the capture time (ns since the epoch).
+pub fn submit_ahead(link: &LinkHandle, seq: u64, range_m: f64, track_epoch: u32) -> u64 {
+    let capture = unix_now_ns();
+    let ahead = detection([range_m, 0.0, 0.0], [-1.0, 0.0, 0.0], track_epoch);
+    link.submit(measurement(seq, capture, Some(ahead)));
+    capture
 }
 
 /// A loopback UDP port nobody listens on (bound, then released).
@@ -77,28 +86,14 @@ pub fn runtime() -> tokio::runtime::Runtime {
         .unwrap()
 }
 
+/// ATTITUDE at boot time 1 s.
 pub fn attitude(roll: f32, pitch: f32, yaw: f32) -> MavMessage {
-    MavMessage::ATTITUDE(ATTITUDE_DATA {
-        time_boot_ms: 1000,
-        roll,
-        pitch,
-        yaw,
-        rollspeed: 0.0,
-        pitchspeed: 0.0,
-        yawspeed: 0.0,
-    })
+    testing::attitude(1000, [roll, pitch, yaw])
 }
 
+/// LOCAL_POSITION_NED at boot time 1 s, at rest.
 pub fn local_position(x: f32, y: f32, z: f32) -> MavMessage {
-    MavMessage::LOCAL_POSITION_NED(LOCAL_POSITION_NED_DATA {
-        time_boot_ms: 1000,
-        x,
-        y,
-        z,
-        vx: 0.0,
-        vy: 0.0,
-        vz: 0.0,
-    })
+    testing::local_position_ned(1000, [x, y, z])
 }
 
 /// One message as the peer saw it.

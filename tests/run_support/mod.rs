@@ -5,9 +5,7 @@
 #![allow(dead_code)]
 
 use drogue_vision::testing;
-use mavlink::dialects::ardupilotmega::{
-    ATTITUDE_DATA, LANDING_TARGET_DATA, LOCAL_POSITION_NED_DATA, MavMessage, TIMESYNC_DATA,
-};
+use mavlink::dialects::ardupilotmega::{LANDING_TARGET_DATA, MavMessage, TIMESYNC_DATA};
 use mavlink::{MavHeader, MavlinkVersion};
 use std::net::{SocketAddr, UdpSocket};
 use std::path::{Path, PathBuf};
@@ -155,26 +153,11 @@ fn peer_loop(
             let time_boot_ms = boot.elapsed().as_millis() as u32;
             let stamp_unix_ns = boot_unix_ns + u64::from(time_boot_ms) * 1_000_000;
             if let Some(pose) = script.as_ref().and_then(|s| s(stamp_unix_ns)) {
-                let [x, y, z] = pose.position_ned_m;
-                let [roll, pitch, yaw] = pose.rpy_rad;
-                out.push(MavMessage::ATTITUDE(ATTITUDE_DATA {
+                out.push(testing::attitude(time_boot_ms, pose.rpy_rad));
+                out.push(testing::local_position_ned(
                     time_boot_ms,
-                    roll,
-                    pitch,
-                    yaw,
-                    rollspeed: 0.0,
-                    pitchspeed: 0.0,
-                    yawspeed: 0.0,
-                }));
-                out.push(MavMessage::LOCAL_POSITION_NED(LOCAL_POSITION_NED_DATA {
-                    time_boot_ms,
-                    x,
-                    y,
-                    z,
-                    vx: 0.0,
-                    vy: 0.0,
-                    vz: 0.0,
-                }));
+                    pose.position_ned_m,
+                ));
             }
         }
         if let Some(to) = link {
