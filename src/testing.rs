@@ -116,6 +116,23 @@ pub fn read_truths(set: &Path) -> Vec<Truth> {
         .collect()
 }
 
+/// Every line of a JSON-lines file (`process --out`, `replay`, a
+/// `truth.jsonl`) as a JSON value, in file order.
+///
+/// # Panics
+/// When the file cannot be read or a line is not JSON (a blank line
+/// included): the file is what the test checks.
+pub fn read_json_lines(path: &Path) -> Vec<serde_json::Value> {
+    let text = std::fs::read_to_string(path)
+        .unwrap_or_else(|e| panic!("cannot read {}: {e}", path.display()));
+    text.lines()
+        .map(|l| {
+            serde_json::from_str(l)
+                .unwrap_or_else(|e| panic!("{}: not JSON ({e}): {l:?}", path.display()))
+        })
+        .collect()
+}
+
 /// The reference sets' camera: 1280x960, the paper's intrinsics, with the
 /// given plumb-bob distortion (k1, k2, p1, p2, k3).
 pub fn paper_camera(distortion: [f64; 5]) -> CameraModel {

@@ -236,9 +236,5 @@ fn process(set: &Path, independent: bool) -> Vec<serde_json::Value> {
         .status()
         .unwrap();
     assert!(status.success());
-    std::fs::read_to_string(&jsonl)
-        .unwrap()
-        .lines()
-        .map(|l| serde_json::from_str(l).unwrap())
-        .collect()
+    testing::read_json_lines(&jsonl)
 }

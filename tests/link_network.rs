@@ -490,13 +490,7 @@ fn tcp_poses_flow_and_survive_a_peer_restart() {
     let msgs = tcp_collect(&mut stream, &mut bytes, Duration::from_secs(2), |m| {
         !landing_target_times(m).is_empty()
     });
-    let lt = msgs
-        .iter()
-        .find_map(|m| match m {
-            MavMessage::LANDING_TARGET(l) => Some(l.clone()),
-            _ => None,
-        })
-        .unwrap();
+    let lt = landing_targets_in(&msgs).swap_remove(0);
     assert_eq!(
         (lt.x, lt.y, lt.z, lt.time_usec),
         (9.0, -0.3, 0.1, capture / 1000)

@@ -71,13 +71,7 @@ fn serial_sends_poses_and_resumes_after_the_device_comes_back() {
         "{} poses",
         landing_target_times(&msgs).len()
     );
-    let lt = msgs
-        .iter()
-        .find_map(|m| match m {
-            MavMessage::LANDING_TARGET(l) => Some(l.clone()),
-            _ => None,
-        })
-        .unwrap();
+    let lt = landing_targets_in(&msgs).swap_remove(0);
     assert_eq!((lt.x, lt.y, lt.z), (10.0, 0.25, -0.5));
     assert!(msgs.iter().any(|m| matches!(m, MavMessage::HEARTBEAT(_))));
     assert!(link.stats().last_heartbeat_age_s >= 0.0);

@@ -9,7 +9,7 @@ mod common;
 
 use common::{FrameErrors, errors, measure_reference_set, med_p95, report};
 use drogue_vision::config::Config;
-use drogue_vision::testing::{Truth, read_truths, reference_set};
+use drogue_vision::testing::{Truth, read_json_lines, read_truths, reference_set};
 use std::path::Path;
 
 /// Measures every frame of a set as an unrelated view; (truth, errors or None).
@@ -102,11 +102,7 @@ fn reference_badinput_handled_as_expected() {
         .status()
         .expect("run process");
     assert!(status.success(), "process exit {status:?}");
-    let records: Vec<serde_json::Value> = std::fs::read_to_string(&jsonl)
-        .expect("output")
-        .lines()
-        .map(|l| serde_json::from_str(l).expect("json line"))
-        .collect();
+    let records = read_json_lines(&jsonl);
     for t in read_truths(&set) {
         let rec = records.iter().find(|r| r["frame"] == t.frame.as_str());
         let detected = rec.is_some_and(|r| r["detected"] == true);

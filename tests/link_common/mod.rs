@@ -8,7 +8,7 @@ use drogue_vision::config::Config;
 use drogue_vision::link::{LinkConfig, LinkHandle};
 use drogue_vision::measure::{Detection, Measurement};
 use drogue_vision::testing;
-use mavlink::dialects::ardupilotmega::MavMessage;
+use mavlink::dialects::ardupilotmega::{LANDING_TARGET_DATA, MavMessage};
 use mavlink::{MavHeader, MavlinkVersion, SigningData};
 use std::io::Read;
 use std::net::{SocketAddr, TcpListener, UdpSocket};
@@ -68,13 +68,21 @@ pub fn free_tcp_port() -> u16 {
         .port()
 }
 
-/// The `time_usec` of every LANDING_TARGET among `msgs`, in order.
-pub fn landing_target_times(msgs: &[MavMessage]) -> Vec<u64> {
+/// Every LANDING_TARGET among `msgs`, in order.
+pub fn landing_targets_in(msgs: &[MavMessage]) -> Vec<LANDING_TARGET_DATA> {
     msgs.iter()
         .filter_map(|m| match m {
-            MavMessage::LANDING_TARGET(l) => Some(l.time_usec),
+            MavMessage::LANDING_TARGET(l) => Some(l.clone()),
             _ => None,
         })
+        .collect()
+}
+
+/// The `time_usec` of every LANDING_TARGET among `msgs`, in order.
+pub fn landing_target_times(msgs: &[MavMessage]) -> Vec<u64> {
+    landing_targets_in(msgs)
+        .iter()
+        .map(|l| l.time_usec)
         .collect()
 }
 
@@ -227,7 +235,7 @@ impl UdpPeer {
     }
 }
 
-pub fn landing_targets(got: &[Got]) -> Vec<mavlink::dialects::ardupilotmega::LANDING_TARGET_DATA> {
+pub fn landing_targets(got: &[Got]) -> Vec<LANDING_TARGET_DATA> {
     got.iter()
         .filter_map(|g| match &g.message {
             MavMessage::LANDING_TARGET(d) => Some(d.clone()),
