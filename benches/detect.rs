@@ -7,17 +7,11 @@ use criterion::{Criterion, criterion_group, criterion_main};
 use drogue_vision::camera::CameraModel;
 use drogue_vision::config::Config;
 use drogue_vision::image_io::read_gray8;
-use drogue_vision::measure::detect::Detector;
 use drogue_vision::measure::ellipse::Ellipse;
+use drogue_vision::testing;
 use image::{GrayImage, Luma};
-use nalgebra::Matrix3;
 use std::hint::black_box;
 use std::path::PathBuf;
-
-fn camera() -> CameraModel {
-    let k = Matrix3::new(1336.2, 0.0, 646.3, 0.0, 1335.4, 473.8, 0.0, 0.0, 1.0);
-    CameraModel::new("bench", 1280, 960, k, [0.0; 5]).unwrap()
-}
 
 /// A dark disc on a light canopy with an outer band, on a sky gradient.
 fn synthetic() -> GrayImage {
@@ -58,15 +52,8 @@ fn frames() -> Vec<(String, GrayImage)> {
 
 fn bench(c: &mut Criterion) {
     let config = Config::embedded();
-    let camera = camera();
-    let mut detector = Detector::new(
-        &config.detect,
-        &camera,
-        drogue_vision::measure::detect::canopy::DrogueCircles {
-            inner_radius_m: config.drogue.inner_radius_m,
-            canopy_radius_m: config.drogue.canopy_radius_m,
-        },
-    );
+    let camera = testing::paper_camera([0.0; 5]);
+    let mut detector = testing::detector(&config, &camera);
     for (name, image) in frames() {
         c.bench_function(&format!("detect full {name}"), |b| {
             b.iter(|| black_box(detector.detect(black_box(&image), None)))
@@ -110,14 +97,7 @@ fn reference_sets(c: &mut Criterion) {
         let Ok(camera) = CameraModel::load(&folder.join("camera.yaml")) else {
             continue;
         };
-        let mut detector = Detector::new(
-            &config.detect,
-            &camera,
-            drogue_vision::measure::detect::canopy::DrogueCircles {
-                inner_radius_m: config.drogue.inner_radius_m,
-                canopy_radius_m: config.drogue.canopy_radius_m,
-            },
-        );
+        let mut detector = testing::detector(&config, &camera);
         let mut names: Vec<PathBuf> = std::fs::read_dir(&folder)
             .into_iter()
             .flatten()

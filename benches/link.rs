@@ -8,13 +8,10 @@ use drogue_vision::config::Config;
 use drogue_vision::link::frame::FrameEncoder;
 use drogue_vision::link::messages::{self, DroguePose};
 use drogue_vision::link::{Link, PoseMessage};
-use drogue_vision::measure::ellipse::Ellipse;
-use drogue_vision::measure::{
-    CirclePose, Detection, Disambiguation, FitQuality, Measurement, StageTimes,
-};
-use drogue_vision::spatial::{Direction, Point};
+use drogue_vision::measure::Measurement;
+use drogue_vision::testing;
 use mavlink::{SigningConfig, SigningData};
-use nalgebra::{Matrix3, Vector3};
+use nalgebra::Vector3;
 use std::hint::black_box;
 use std::net::UdpSocket;
 use std::sync::Arc;
@@ -23,40 +20,11 @@ use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 fn measurement() -> Measurement {
     let p = Vector3::new(8.0, 0.4, -0.2);
     let n = Vector3::new(-0.98, 0.1, 0.17).normalize();
+    let mut detection = testing::detection(p, n, 1);
+    detection.ellipse_px.theta = 0.1;
     Measurement {
-        seq: 1,
-        capture_time_ns: 1_700_000_000_000_000_000,
-        detection: Some(Detection {
-            ellipse_px: Ellipse {
-                cx: 640.0,
-                cy: 480.0,
-                a: 40.0,
-                b: 38.0,
-                theta: 0.1,
-            },
-            pose_camera: CirclePose {
-                centre_camera_m: Vector3::new(p.y, p.z, p.x),
-                normal_camera: Vector3::new(n.y, n.z, n.x),
-            },
-            alt_pose_camera: None,
-            disambiguation: Disambiguation::CanopyRim,
-            position_body_m: Point::new(p),
-            normal_body: Direction::new(n),
-            position_from_probe_body_m: Point::new(p),
-            position_cov_body_m2: Matrix3::from_diagonal(&Vector3::new(4e-4, 1e-5, 2e-5)),
-            normal_sigma_rad: 0.02,
-            quality: FitQuality {
-                points: 200,
-                inliers: 180,
-                rms_residual_px: 0.3,
-                score: 0.8,
-            },
-            track_epoch: 1,
-            rim_points_px: vec![],
-            inliers: vec![],
-        }),
         tracked: true,
-        times: StageTimes::default(),
+        ..testing::measurement(1, 1_700_000_000_000_000_000, Some(detection))
     }
 }
 

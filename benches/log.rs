@@ -10,17 +10,12 @@
 
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use drogue_sim::FrameTruth;
-use drogue_vision::camera::CameraModel;
 use drogue_vision::frame::{Frame, FrameOrigin};
-use drogue_vision::log::{
-    FileStorage, FlightLog, ImageEncoding, LogConfig, MountTransforms, Storage, StorageFile,
-};
+use drogue_vision::log::{FileStorage, FlightLog, ImageEncoding, LogConfig, Storage, StorageFile};
 use drogue_vision::measure::ellipse::Ellipse;
-use drogue_vision::measure::{
-    CirclePose, Detection, Disambiguation, FitQuality, Measurement, StageTimes,
-};
+use drogue_vision::measure::{Detection, FitQuality, Measurement};
 use drogue_vision::record::DetectionRecord;
-use drogue_vision::spatial::{Direction, Point};
+use drogue_vision::testing;
 use nalgebra::{Matrix3, Vector3};
 use std::io::{self, Seek, SeekFrom, Write};
 use std::path::Path;
@@ -73,11 +68,6 @@ impl Storage for Discard {
     }
 }
 
-fn camera() -> CameraModel {
-    let k = Matrix3::new(1336.2, 0.0, 646.3, 0.0, 1335.4, 473.8, 0.0, 0.0, 1.0);
-    CameraModel::new("bench", 1280, 960, k, [0.0; 5]).unwrap()
-}
-
 /// A frame as the pipeline logs it: the frame, its truth, its measurement
 /// and the measurement's JSON record.
 type LoggedFrame = (
@@ -90,43 +80,19 @@ type LoggedFrame = (
 fn inputs() -> Vec<LoggedFrame> {
     (0..BATCH)
         .map(|seq| {
-            let mut s = seq.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1;
-            let image = image::GrayImage::from_fn(1280, 960, |_, _| {
-                s ^= s << 13;
-                s ^= s >> 7;
-                s ^= s << 17;
-                image::Luma([(s >> 24) as u8])
-            });
+            let image = testing::noise_image(seq, 1280, 960);
             let centre = Vector3::new(0.1, -0.05, 10.0);
             let normal = Vector3::new(0.05, 0.1, -1.0).normalize();
+            let t = 1_795_341_600_000_000_000 + seq * 33_333_333;
             let truth = FrameTruth {
-                frame: format!("frame_{seq:06}.png"),
-                seq,
-                t: seq as f64 / 30.0,
-                expect: "detect".into(),
-                radius: 0.15,
-                position_camera: centre.into(),
-                normal_camera: normal.into(),
-                alt_position_camera: centre.into(),
                 alt_normal_camera: normal.into(),
                 ellipse: None,
-                range_m: centre.norm(),
-                tilt_deg: 5.0,
-                probe_rim_frac: 0.0,
-                hose_rim_frac: 0.0,
-                rim_fully_in_image: true,
                 position_body: centre.into(),
                 normal_body: normal.into(),
-                ned_frame: drogue_sim::NED_FRAME_SCENARIO.into(),
                 position_ned: [0.0; 3],
                 receiver_position_ned: [0.0; 3],
-                receiver_q_ned_body: [1.0, 0.0, 0.0, 0.0],
-                capture_time_ns: 1_795_341_600_000_000_000 + seq * 33_333_333,
-                canopy_radius: 0.33,
-                visible_rim_frac: 1.0,
-                coupled: false,
+                ..testing::frame_truth(seq, centre, normal, t)
             };
-            let t = truth.capture_time_ns;
             let frame = Frame {
                 seq,
                 capture_time_ns: t,
@@ -136,52 +102,36 @@ fn inputs() -> Vec<LoggedFrame> {
             // A typical detection: ~300 rim points.
             let n = 300;
             let m = Measurement {
-                seq,
-                capture_time_ns: t,
-                detection: Some(Detection {
-                    ellipse_px: Ellipse::new(640.0, 480.0, 60.0, 50.0, 0.1),
-                    pose_camera: CirclePose {
-                        centre_camera_m: centre,
-                        normal_camera: normal,
-                    },
-                    alt_pose_camera: None,
-                    disambiguation: Disambiguation::CanopyRim,
-                    position_body_m: Point::new(centre),
-                    normal_body: Direction::new(normal),
-                    position_from_probe_body_m: Point::new(centre),
-                    position_cov_body_m2: Matrix3::identity() * 1e-4,
-                    normal_sigma_rad: 0.01,
-                    quality: FitQuality {
-                        points: n,
-                        inliers: n - 10,
-                        rms_residual_px: 0.3,
-                        score: 0.9,
-                    },
-                    track_epoch: 1,
-                    rim_points_px: (0..n)
-                        .map(|i| {
-                            let a = i as f32 * std::f32::consts::TAU / n as f32;
-                            [640.0 + 60.0 * a.cos(), 480.0 + 50.0 * a.sin()]
-                        })
-                        .collect(),
-                    inliers: (0..n).map(|i| !i.is_multiple_of(30)).collect(),
-                }),
                 tracked: true,
-                times: StageTimes::default(),
+                ..testing::measurement(
+                    seq,
+                    t,
+                    Some(Detection {
+                        ellipse_px: Ellipse::new(640.0, 480.0, 60.0, 50.0, 0.1),
+                        position_cov_body_m2: Matrix3::identity() * 1e-4,
+                        normal_sigma_rad: 0.01,
+                        quality: FitQuality {
+                            points: n,
+                            inliers: n - 10,
+                            rms_residual_px: 0.3,
+                            score: 0.9,
+                        },
+                        rim_points_px: (0..n)
+                            .map(|i| {
+                                let a = i as f32 * std::f32::consts::TAU / n as f32;
+                                [640.0 + 60.0 * a.cos(), 480.0 + 50.0 * a.sin()]
+                            })
+                            .collect(),
+                        inliers: (0..n).map(|i| !i.is_multiple_of(30)).collect(),
+                        ..testing::detection(centre, normal, 1)
+                    }),
+                )
             };
             let json = serde_json::to_value(DetectionRecord::from_measurement(seq.to_string(), &m))
                 .unwrap();
             (Arc::new(frame), Box::new(truth), Arc::new(m), json)
         })
         .collect()
-}
-
-fn mount() -> MountTransforms {
-    MountTransforms {
-        camera_in_body_m: [1.5, 0.0, -0.2],
-        q_body_camera: [0.5, 0.5, 0.5, 0.5],
-        probe_in_body_m: [3.0, 0.4, -0.5],
-    }
 }
 
 /// Time to log BATCH frames, from the first push to the file closed.
@@ -192,10 +142,11 @@ fn log_batch(
     inputs: &[LoggedFrame],
 ) -> Duration {
     let start = Instant::now();
-    let log = FlightLog::start_with_storage(cfg, dir, &camera(), storage).unwrap();
+    let log =
+        FlightLog::start_with_storage(cfg, dir, &testing::paper_camera([0.0; 5]), storage).unwrap();
     for (f, truth, m, j) in inputs {
         log.frame_with_truth(f.clone(), Some(truth.clone()));
-        log.measurement_with_transforms(m.clone(), j.clone(), mount());
+        log.measurement_with_transforms(m.clone(), j.clone(), testing::mount_transforms());
     }
     let summary = log.finish().unwrap();
     let elapsed = start.elapsed();

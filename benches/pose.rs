@@ -9,15 +9,10 @@ use drogue_vision::measure::ambiguity::{canopy_support, canopy_supports};
 use drogue_vision::measure::ellipse::{Conic, Ellipse};
 use drogue_vision::measure::pose::{CirclePose, cone_pose, pose_uncertainty};
 use drogue_vision::measure::track::Tracker;
+use drogue_vision::testing;
 use image::{GrayImage, Luma};
 use nalgebra::{Matrix3, Vector3};
 use std::hint::black_box;
-
-/// The reference sets' camera (1280x960, the paper's lens).
-fn camera() -> CameraModel {
-    let k = Matrix3::new(1336.2, 0.0, 646.3, 0.0, 1335.4, 473.8, 0.0, 0.0, 1.0);
-    CameraModel::new("bench", 1280, 960, k, [0.0; 5]).unwrap()
-}
 
 /// A drogue 3 m away tilted 30 degrees: its exact ellipse, rim points and a
 /// rendered frame (sky, canopy, dark rim band, dark inner circle).
@@ -51,7 +46,8 @@ fn scene(cam: &CameraModel) -> (Ellipse, Vec<[f64; 2]>, GrayImage) {
 }
 
 fn bench(c: &mut Criterion) {
-    let cam = camera();
+    // The reference sets' camera (1280x960, the paper's lens).
+    let cam = testing::paper_camera([0.0; 5]);
     let config = Config::embedded();
     let (ellipse, points, image) = scene(&cam);
     let quality = FitQuality {

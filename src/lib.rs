@@ -19,3 +19,6 @@ pub mod priority;
 pub mod record;
 pub mod source;
 pub mod spatial;
+/// Shared test fixtures; see the module docs for how the feature is enabled.
+#[cfg(any(test, feature = "testing"))]
+pub mod testing;

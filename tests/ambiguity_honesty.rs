@@ -15,6 +15,7 @@ use drogue_sim::sweep::{CANOPY_RADIUS_M, DrogueTruth, Factor, Level, Sweep, Swee
 use drogue_vision::config::Config;
 use drogue_vision::frame::{Frame, FrameOrigin};
 use drogue_vision::measure::{Disambiguation, Measurement, Measurer};
+use drogue_vision::testing;
 use std::path::{Path, PathBuf};
 
 fn frame(f: &SweepFrame, seq: u64, capture_time_ns: u64) -> Frame {
@@ -27,10 +28,7 @@ fn frame(f: &SweepFrame, seq: u64, capture_time_ns: u64) -> Frame {
 }
 
 fn measurer(f: &SweepFrame) -> Measurer {
-    let c = &f.camera;
-    let k = nalgebra::Matrix3::new(c.fx, 0.0, c.cx, 0.0, c.fy, c.cy, 0.0, 0.0, 1.0);
-    let camera =
-        drogue_vision::camera::CameraModel::new("sim", c.width, c.height, k, c.distortion).unwrap();
+    let camera = testing::camera_from_sim(&f.camera, "sim");
     Measurer::new(camera, &Config::embedded().measure()).unwrap()
 }
 
@@ -188,20 +186,15 @@ fn process_folder_without_independent_does_not_borrow_normals() {
 #[test]
 #[ignore = "needs the reference frames: set DROGUE_REFERENCE_DIR (.ci/run does)"]
 fn reference_range_set_is_honest() {
-    let dir = common::reference_dir();
-    let set = dir.join("range");
-    let truth: Vec<serde_json::Value> = std::fs::read_to_string(set.join("truth.jsonl"))
-        .unwrap()
-        .lines()
-        .map(|l| serde_json::from_str(l).unwrap())
-        .collect();
+    let set = testing::reference_set("range");
+    let truth = testing::read_truths(&set);
     for independent in [true, false] {
         let records = process(&set, independent);
         for t in &truth {
-            let frame = t["frame"].as_str().unwrap();
+            let frame = t.frame.as_str();
             let r = records.iter().find(|r| r["frame"] == frame).unwrap();
             let how = r["disambiguation"].as_str().unwrap_or("-");
-            let group = t["group"].as_str().unwrap_or("-");
+            let group = t.group.as_deref().unwrap_or("-");
             eprintln!("independent {independent} {frame} {group}: {how}");
             assert_ne!(how, "continuity", "{frame}");
             if how == "canopy_rim" {
@@ -215,9 +208,10 @@ fn reference_range_set_is_honest() {
                     common::v3([a[0], a[1], a[2]])
                 };
                 let n = v(&r["normal_camera"]);
+                let truth_normal = |a: Option<[f64; 3]>| common::v3(a.expect("a truth normal"));
                 let (e, e_alt) = (
-                    common::angle_deg(&n, &v(&t["normal_camera"])),
-                    common::angle_deg(&n, &v(&t["alt_normal_camera"])),
+                    common::angle_deg(&n, &truth_normal(t.normal_camera)),
+                    common::angle_deg(&n, &truth_normal(t.alt_normal_camera)),
                 );
                 assert!(e <= e_alt, "{frame}: canopy_rim with the mirror normal");
             }
@@ -242,9 +236,5 @@ fn process(set: &Path, independent: bool) -> Vec<serde_json::Value> {
         .status()
         .unwrap();
     assert!(status.success());
-    std::fs::read_to_string(&jsonl)
-        .unwrap()
-        .lines()
-        .map(|l| serde_json::from_str(l).unwrap())
-        .collect()
+    testing::read_json_lines(&jsonl)
 }

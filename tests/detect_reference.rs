@@ -10,13 +10,9 @@
 use drogue_vision::camera::CameraModel;
 use drogue_vision::config::Config;
 use drogue_vision::image_io::read_gray8;
-use drogue_vision::measure::detect::Detector;
 use drogue_vision::measure::ellipse::{Conic, Ellipse};
+use drogue_vision::testing::{self, read_truths, reference_set};
 use nalgebra::{Matrix3, Matrix6, Vector6};
-use std::path::Path;
-
-mod common;
-use common::reference_dir;
 
 /// Weighted algebraic conic fit (weights per point), normalised coordinates.
 fn weighted_conic(points: &[[f64; 2]], weights: &[f64]) -> Option<Conic> {
@@ -88,21 +84,6 @@ fn robust_fit(points: &[[f64; 2]]) -> Option<Ellipse> {
     conic.to_ellipse()
 }
 
-fn truth_lines(set: &Path) -> Vec<serde_json::Value> {
-    std::fs::read_to_string(set.join("truth.jsonl"))
-        .unwrap()
-        .lines()
-        .filter(|l| !l.trim().is_empty())
-        .map(|l| serde_json::from_str(l).unwrap())
-        .collect()
-}
-
-fn truth_ellipse(t: &serde_json::Value) -> Ellipse {
-    let e = &t["ellipse"];
-    let g = |k: &str| e[k].as_f64().unwrap();
-    Ellipse::new(g("cx"), g("cy"), g("a"), g("b"), g("theta"))
-}
-
 /// A detection whose ellipse centre is this far from the truth found
 /// something other than the drogue (the accuracy target is 0.1 px median).
 const WRONG_DETECTION_PX: f64 = 1.0;
@@ -115,26 +96,17 @@ fn percentile(v: &mut [f64], q: f64) -> f64 {
 #[test]
 #[ignore = "needs the reference frames: set DROGUE_REFERENCE_DIR (.ci/run does)"]
 fn reference_sets() {
-    let root = reference_dir();
     let config = Config::embedded();
     let mut failures = Vec::new();
     let mut param_errors = Vec::new();
     let mut theta_errors_deg = Vec::new();
     for set in ["paper10", "occlusion", "badinput", "negative"] {
-        let dir = root.join(set);
+        let dir = reference_set(set);
         let camera = CameraModel::load(&dir.join("camera.yaml")).unwrap();
-        let mut detector = Detector::new(
-            &config.detect,
-            &camera,
-            drogue_vision::measure::detect::canopy::DrogueCircles {
-                inner_radius_m: config.drogue.inner_radius_m,
-                canopy_radius_m: config.drogue.canopy_radius_m,
-            },
-        );
+        let mut detector = testing::detector(&config, &camera);
         let (mut expected, mut detected) = (0, 0);
-        for t in truth_lines(&dir) {
-            let frame = t["frame"].as_str().unwrap();
-            let expect = t["expect"].as_str().unwrap();
+        for t in read_truths(&dir) {
+            let (frame, expect) = (t.frame.as_str(), t.expect.as_str());
             let path = dir.join(frame);
             let Ok(image) = read_gray8(&path, None) else {
                 assert!(
@@ -152,7 +124,9 @@ fn reference_sets() {
                         continue;
                     };
                     detected += 1;
-                    let truth = truth_ellipse(&t);
+                    // In canonical form, as the fit gives it.
+                    let e = t.ellipse.expect("a truth ellipse on a detect frame");
+                    let truth = Ellipse::new(e.cx, e.cy, e.a, e.b, e.theta);
                     let pts: Vec<[f64; 2]> = cand
                         .rim_points_px
                         .iter()

@@ -5,6 +5,7 @@
 //! kernel, wait4's ru_maxrss of the child); a sample of random configs runs
 //! the binary to exit 0 or 2 in bounded time.
 
+use drogue_vision::testing::read_json_lines;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
@@ -221,14 +222,6 @@ fn sim_frame(d: &Path) -> image::GrayImage {
     image::open(png).unwrap().into_luma8()
 }
 
-fn records(path: &Path) -> Vec<serde_json::Value> {
-    std::fs::read_to_string(path)
-        .unwrap()
-        .lines()
-        .map(|l| serde_json::from_str(l).unwrap())
-        .collect()
-}
-
 /// A JPEG cut short is an unreadable frame (an error record), while the
 /// whole JPEG of the same frame is detected.
 #[test]
@@ -256,7 +249,7 @@ fn a_truncated_jpeg_is_an_unreadable_frame() {
         SHORT,
     );
     assert_eq!(o.code, Some(0), "{}", o.stderr);
-    let r = records(&d.join("o.jsonl"));
+    let r = read_json_lines(&d.join("o.jsonl"));
     assert_eq!(r.len(), 2);
     assert!(r[0]["detected"].as_bool().unwrap_or(false), "{}", r[0]);
     let e = r[1]["error"].as_str().unwrap_or_default();
@@ -286,7 +279,7 @@ fn a_frame_of_the_wrong_size_is_refused() {
         SHORT,
     );
     assert_eq!(o.code, Some(0), "{}", o.stderr);
-    let r = records(&d.join("o.jsonl"));
+    let r = read_json_lines(&d.join("o.jsonl"));
     let e = r[1]["error"].as_str().unwrap_or_default();
     assert!(e.contains("80x60") && e.contains("64x48"), "{}", r[1]);
 }
@@ -332,7 +325,7 @@ fn image_bombs_and_a_lying_mcap_stay_under_64_mb() {
         SHORT,
     );
     assert_eq!(o.code, Some(0), "{}", o.stderr);
-    let r = records(&d.join("o.jsonl"));
+    let r = read_json_lines(&d.join("o.jsonl"));
     let e = r[1]["error"].as_str().unwrap_or_default();
     assert!(e.contains("20000"), "{e}");
     println!("png bomb: peak {} KiB", o.max_rss_kib);
@@ -479,7 +472,7 @@ fn an_oversized_mcap_record_is_skipped_and_counted() {
     assert_eq!(base.code, Some(0), "{}", base.stderr);
     let o = run(&["process", "big.mcap", "--out", "b.jsonl"], d, SHORT);
     assert_eq!(o.code, Some(0), "{}", o.stderr);
-    let frames: Vec<String> = records(&d.join("b.jsonl"))
+    let frames: Vec<String> = read_json_lines(&d.join("b.jsonl"))
         .iter()
         .map(|r| r["frame"].as_str().unwrap().to_string())
         .collect();

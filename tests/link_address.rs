@@ -7,28 +7,10 @@ mod link_common;
 
 use drogue_vision::link::Link;
 use link_common::*;
-use mavlink::dialects::ardupilotmega::{
-    HEARTBEAT_DATA, MavAutopilot, MavMessage, MavModeFlag, MavState, MavType,
-};
-use std::io::{Read, Write};
-use std::net::{TcpListener, TcpStream, UdpSocket};
+use mavlink::dialects::ardupilotmega::{MavAutopilot, MavMessage, MavType};
+use std::io::Write;
+use std::net::{TcpStream, UdpSocket};
 use std::time::{Duration, Instant};
-
-fn free_tcp_port() -> u16 {
-    TcpListener::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port()
-}
-
-fn free_udp_port() -> u16 {
-    UdpSocket::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port()
-}
 
 /// Connects to the link's `tcpin` listener, retrying while it binds.
 fn connect(port: u16) -> TcpStream {
@@ -48,28 +30,8 @@ fn connect(port: u16) -> TcpStream {
 /// Reads until `n` messages named `name` arrived (or 3 s passed).
 fn read_until(stream: &mut TcpStream, name: &str, n: usize) -> Vec<MavMessage> {
     use mavlink::Message;
-    let end = Instant::now() + Duration::from_secs(3);
-    let mut bytes = Vec::new();
-    let mut buf = [0u8; 4096];
-    loop {
-        let msgs: Vec<MavMessage> = parse_all(&bytes, None).into_iter().map(|m| m.1).collect();
-        if msgs.iter().filter(|m| m.message_name() == name).count() >= n || Instant::now() > end {
-            return msgs;
-        }
-        if let Ok(k) = stream.read(&mut buf) {
-            bytes.extend_from_slice(&buf[..k]);
-        }
-    }
-}
-
-fn heartbeat(mavtype: MavType, autopilot: MavAutopilot) -> MavMessage {
-    MavMessage::HEARTBEAT(HEARTBEAT_DATA {
-        custom_mode: 0,
-        mavtype,
-        autopilot,
-        base_mode: MavModeFlag::empty(),
-        system_status: MavState::MAV_STATE_ACTIVE,
-        mavlink_version: 3,
+    collect_stream(stream, &mut Vec::new(), Duration::from_secs(3), |msgs| {
+        msgs.iter().filter(|m| m.message_name() == name).count() >= n
     })
 }
 
@@ -181,15 +143,22 @@ fn a_ground_station_heartbeat_is_not_the_autopilot() {
         heartbeat(
             MavType::MAV_TYPE_GCS,
             MavAutopilot::MAV_AUTOPILOT_ARDUPILOTMEGA,
+            0,
         ),
-        heartbeat(MavType::MAV_TYPE_GCS, MavAutopilot::MAV_AUTOPILOT_INVALID),
+        heartbeat(
+            MavType::MAV_TYPE_GCS,
+            MavAutopilot::MAV_AUTOPILOT_INVALID,
+            0,
+        ),
         heartbeat(
             MavType::MAV_TYPE_ONBOARD_CONTROLLER,
             MavAutopilot::MAV_AUTOPILOT_PX4,
+            0,
         ),
         heartbeat(
             MavType::MAV_TYPE_CAMERA,
             MavAutopilot::MAV_AUTOPILOT_INVALID,
+            0,
         ),
     ] {
         peer.send(&hb);
@@ -208,6 +177,7 @@ fn a_ground_station_heartbeat_is_not_the_autopilot() {
     peer.send(&heartbeat(
         MavType::MAV_TYPE_FIXED_WING,
         MavAutopilot::MAV_AUTOPILOT_PX4,
+        0,
     ));
     assert!(wait_for(Duration::from_secs(2), || link
         .stats()
@@ -219,6 +189,7 @@ fn a_ground_station_heartbeat_is_not_the_autopilot() {
         peer.send(&heartbeat(
             MavType::MAV_TYPE_GCS,
             MavAutopilot::MAV_AUTOPILOT_INVALID,
+            0,
         ));
         std::thread::sleep(Duration::from_millis(50));
     }

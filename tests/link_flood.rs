@@ -16,14 +16,6 @@ use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::thread::sleep;
 use std::time::{Duration, Instant};
 
-fn free_udp_port() -> u16 {
-    UdpSocket::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port()
-}
-
 /// Garbage from another port, a while: one byte, 0xFE runs, a frame with a
 /// bad CRC and a truncated one; none of it may take the peer.
 fn send_garbage(to: std::net::SocketAddr, extra: &[Vec<u8>]) -> UdpSocket {
@@ -80,12 +72,7 @@ fn udpin_keeps_the_autopilot_while_garbage_arrives_from_another_port() {
     assert!(introduce(&mut autopilot, None));
 
     let attacker = send_garbage(to, &[]);
-    let capture = unix_now_ns();
-    link.submit(measurement(
-        1,
-        capture,
-        Some(detection([6.0, 0.0, 0.0], [-1.0, 0.0, 0.0], 1)),
-    ));
+    let capture = submit_ahead(&link, 1, 6.0, 1);
     let got = autopilot.collect_until(Duration::from_secs(2), |g| !landing_targets(g).is_empty());
     assert_eq!(landing_targets(&got)[0].time_usec, capture / 1000);
     assert!(

@@ -12,7 +12,6 @@ use mavlink::dialects::ardupilotmega::{
 };
 use mavlink::{MavlinkVersion, SigningConfig, SigningData};
 use sha2::{Digest, Sha256};
-use std::io::Read;
 use std::net::{TcpListener, UdpSocket};
 use std::thread::sleep;
 use std::time::{Duration, Instant};
@@ -408,15 +407,6 @@ fn udp_garbage_and_a_flood_are_counted_and_do_not_harm_the_stream() {
     link.shutdown();
 }
 
-/// A loopback port nobody listens on (bound, then released).
-fn free_udp_port() -> u16 {
-    UdpSocket::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port()
-}
-
 #[test]
 fn udpout_keeps_sending_with_nobody_listening() {
     let rt = runtime();
@@ -429,12 +419,7 @@ fn udpout_keeps_sending_with_nobody_listening() {
     // Someone starts listening: heartbeats and poses arrive.
     let mut peer = UdpPeer::on(UdpSocket::bind(("127.0.0.1", port)).unwrap());
     peer.wait_for_link();
-    let capture = unix_now_ns();
-    link.submit(measurement(
-        1,
-        capture,
-        Some(detection([5.0, 0.0, 0.0], [-1.0, 0.0, 0.0], 1)),
-    ));
+    let capture = submit_ahead(&link, 1, 5.0, 1);
     let got = peer.collect_until(Duration::from_secs(2), |g| !landing_targets(g).is_empty());
     assert_eq!(landing_targets(&got)[0].time_usec, capture / 1000);
     link.shutdown();
@@ -462,22 +447,12 @@ fn tcp_collect(
     stream: &mut std::net::TcpStream,
     bytes: &mut Vec<u8>,
     limit: Duration,
-    mut done: impl FnMut(&[MavMessage]) -> bool,
+    done: impl FnMut(&[MavMessage]) -> bool,
 ) -> Vec<MavMessage> {
     stream
         .set_read_timeout(Some(Duration::from_millis(20)))
         .unwrap();
-    let end = Instant::now() + limit;
-    let mut buf = [0u8; 4096];
-    loop {
-        let msgs: Vec<MavMessage> = parse_all(bytes, None).into_iter().map(|m| m.1).collect();
-        if done(&msgs) || Instant::now() > end {
-            return msgs;
-        }
-        if let Ok(n) = stream.read(&mut buf) {
-            bytes.extend_from_slice(&buf[..n]);
-        }
-    }
+    collect_stream(stream, bytes, limit, done)
 }
 
 fn accept_within(listener: &TcpListener, limit: Duration) -> Option<std::net::TcpStream> {
@@ -491,15 +466,6 @@ fn accept_within(listener: &TcpListener, limit: Duration) -> Option<std::net::Tc
         sleep(Duration::from_millis(5));
     }
     None
-}
-
-fn lt_times(msgs: &[MavMessage]) -> Vec<u64> {
-    msgs.iter()
-        .filter_map(|m| match m {
-            MavMessage::LANDING_TARGET(l) => Some(l.time_usec),
-            _ => None,
-        })
-        .collect()
 }
 
 #[test]
@@ -522,15 +488,9 @@ fn tcp_poses_flow_and_survive_a_peer_restart() {
     link.submit(measurement(1, capture, Some(det)));
     let mut bytes = Vec::new();
     let msgs = tcp_collect(&mut stream, &mut bytes, Duration::from_secs(2), |m| {
-        !lt_times(m).is_empty()
+        !landing_target_times(m).is_empty()
     });
-    let lt = msgs
-        .iter()
-        .find_map(|m| match m {
-            MavMessage::LANDING_TARGET(l) => Some(l.clone()),
-            _ => None,
-        })
-        .unwrap();
+    let lt = landing_targets_in(&msgs).swap_remove(0);
     assert_eq!(
         (lt.x, lt.y, lt.z, lt.time_usec),
         (9.0, -0.3, 0.1, capture / 1000)
@@ -546,30 +506,20 @@ fn tcp_poses_flow_and_survive_a_peer_restart() {
     drop(stream);
     drop(listener);
     sleep(Duration::from_millis(100));
-    let old_capture = unix_now_ns();
-    link.submit(measurement(
-        2,
-        old_capture,
-        Some(detection([9.0, 0.0, 0.0], [-1.0, 0.0, 0.0], 1)),
-    ));
+    let old_capture = submit_ahead(&link, 2, 9.0, 1);
     sleep(Duration::from_millis(600));
     let listener = TcpListener::bind(("127.0.0.1", port)).unwrap();
     let back = Instant::now();
     let mut stream = accept_within(&listener, Duration::from_secs(3)).expect("link reconnects");
     let reconnect_s = back.elapsed().as_secs_f64();
     assert!(reconnect_s < 1.5, "reconnected after {reconnect_s:.2} s");
-    let capture2 = unix_now_ns();
-    link.submit(measurement(
-        3,
-        capture2,
-        Some(detection([8.0, 0.0, 0.0], [-1.0, 0.0, 0.0], 2)),
-    ));
+    let capture2 = submit_ahead(&link, 3, 8.0, 2);
     let mut bytes = Vec::new();
     let msgs = tcp_collect(&mut stream, &mut bytes, Duration::from_secs(2), |m| {
-        lt_times(m).contains(&(capture2 / 1000))
+        landing_target_times(m).contains(&(capture2 / 1000))
             && m.iter().any(|x| matches!(x, MavMessage::HEARTBEAT(_)))
     });
-    let times = lt_times(&msgs);
+    let times = landing_target_times(&msgs);
     assert!(
         times.contains(&(capture2 / 1000)),
         "no pose after reconnect"

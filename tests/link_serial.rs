@@ -8,7 +8,7 @@ use drogue_vision::link::Link;
 use link_common::*;
 use mavlink::dialects::ardupilotmega::MavMessage;
 use serialport::{SerialPort, TTYPort};
-use std::io::{Read, Write};
+use std::io::Write;
 use std::path::Path;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -24,35 +24,6 @@ fn plug(link: &Path) -> TTYPort {
     let _ = std::fs::remove_file(link);
     std::os::unix::fs::symlink(name, link).unwrap();
     master
-}
-
-/// Reads what the link wrote until `done` or `limit`.
-fn collect(
-    master: &mut TTYPort,
-    bytes: &mut Vec<u8>,
-    limit: Duration,
-    mut done: impl FnMut(&[MavMessage]) -> bool,
-) -> Vec<MavMessage> {
-    let end = Instant::now() + limit;
-    let mut buf = [0u8; 4096];
-    loop {
-        let msgs: Vec<MavMessage> = parse_all(bytes, None).into_iter().map(|m| m.1).collect();
-        if done(&msgs) || Instant::now() > end {
-            return msgs;
-        }
-        if let Ok(n) = master.read(&mut buf) {
-            bytes.extend_from_slice(&buf[..n]);
-        }
-    }
-}
-
-fn pose_times(msgs: &[MavMessage]) -> Vec<u64> {
-    msgs.iter()
-        .filter_map(|m| match m {
-            MavMessage::LANDING_TARGET(l) => Some(l.time_usec),
-            _ => None,
-        })
-        .collect()
 }
 
 #[test]
@@ -86,27 +57,21 @@ fn serial_sends_poses_and_resumes_after_the_device_comes_back() {
 
     // Autopilot heartbeats in (once the link has the port open), poses out.
     let mut bytes = Vec::new();
-    collect(&mut master, &mut bytes, Duration::from_secs(3), |m| {
+    collect_stream(&mut master, &mut bytes, Duration::from_secs(3), |m| {
         !m.is_empty()
     });
     master
         .write_all(&encode(&autopilot_heartbeat(), 0, None))
         .unwrap();
-    let msgs = collect(&mut master, &mut bytes, Duration::from_secs(3), |m| {
-        pose_times(m).len() >= 5
+    let msgs = collect_stream(&mut master, &mut bytes, Duration::from_secs(3), |m| {
+        landing_target_times(m).len() >= 5
     });
     assert!(
-        pose_times(&msgs).len() >= 5,
+        landing_target_times(&msgs).len() >= 5,
         "{} poses",
-        pose_times(&msgs).len()
+        landing_target_times(&msgs).len()
     );
-    let lt = msgs
-        .iter()
-        .find_map(|m| match m {
-            MavMessage::LANDING_TARGET(l) => Some(l.clone()),
-            _ => None,
-        })
-        .unwrap();
+    let lt = landing_targets_in(&msgs).swap_remove(0);
     assert_eq!((lt.x, lt.y, lt.z), (10.0, 0.25, -0.5));
     assert!(msgs.iter().any(|m| matches!(m, MavMessage::HEARTBEAT(_))));
     assert!(link.stats().last_heartbeat_age_s >= 0.0);
@@ -125,11 +90,11 @@ fn serial_sends_poses_and_resumes_after_the_device_comes_back() {
     let mut master = plug(&dev);
     let back = Instant::now();
     let mut bytes = Vec::new();
-    let msgs = collect(&mut master, &mut bytes, Duration::from_secs(3), |m| {
-        !pose_times(m).is_empty()
+    let msgs = collect_stream(&mut master, &mut bytes, Duration::from_secs(3), |m| {
+        !landing_target_times(m).is_empty()
     });
     let resumed = back.elapsed();
-    let times = pose_times(&msgs);
+    let times = landing_target_times(&msgs);
     assert!(!times.is_empty(), "no pose after the device came back");
     assert!(
         resumed < Duration::from_secs(2),
@@ -162,7 +127,7 @@ fn serial_garbage_does_not_stop_the_stream() {
     let addr = format!("serial:{}:57600", dev.display());
     let link = Link::start(&cfg, Some(&addr), rt.handle()).unwrap();
     let mut bytes = Vec::new();
-    collect(&mut master, &mut bytes, Duration::from_secs(2), |m| {
+    collect_stream(&mut master, &mut bytes, Duration::from_secs(2), |m| {
         !m.is_empty()
     });
     // Noise on the line, a frame cut short, then a good heartbeat.
@@ -178,16 +143,11 @@ fn serial_garbage_does_not_stop_the_stream() {
     let s = link.stats();
     assert!(s.bad_bytes >= 5000, "{s:?}");
     assert!(s.last_heartbeat_age_s >= 0.0, "{s:?}");
-    let capture = unix_now_ns();
-    link.submit(measurement(
-        1,
-        capture,
-        Some(detection([4.0, 0.0, 0.0], [-1.0, 0.0, 0.0], 1)),
-    ));
+    let capture = submit_ahead(&link, 1, 4.0, 1);
     let mut bytes = Vec::new();
-    let msgs = collect(&mut master, &mut bytes, Duration::from_secs(2), |m| {
-        !pose_times(m).is_empty()
+    let msgs = collect_stream(&mut master, &mut bytes, Duration::from_secs(2), |m| {
+        !landing_target_times(m).is_empty()
     });
-    assert_eq!(pose_times(&msgs), vec![capture / 1000]);
+    assert_eq!(landing_target_times(&msgs), vec![capture / 1000]);
     link.shutdown();
 }

@@ -17,7 +17,6 @@ use drogue_vision::log::{ChunkCompression, FlightLog, LogConfig, LogError, metad
 use log_support as s;
 use rand::{Rng, SeedableRng};
 use std::path::{Path, PathBuf};
-use std::sync::Arc;
 
 const FRAMES: u64 = 24;
 
@@ -30,10 +29,7 @@ fn write_log(dir: &Path, cfg: &LogConfig) -> PathBuf {
         [("k".to_string(), "v".to_string())].into_iter().collect(),
     );
     for seq in 0..FRAMES {
-        let m = Arc::new(s::measurement(seq));
-        let json = s::detection_json(&m);
-        log.frame_with_truth(Arc::new(s::frame(seq, true)), Some(Box::new(s::truth(seq))));
-        log.measurement_with_transforms(m, json, s::mount());
+        s::log_frame(&log, seq, true);
         log.mavlink(s::link_event(seq, true));
     }
     let summary = log.finish().unwrap();

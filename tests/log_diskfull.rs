@@ -5,63 +5,11 @@
 
 mod log_support;
 
-use drogue_vision::log::{FlightLog, Storage, StorageFile, recover, replay};
+use drogue_vision::log::{recover, replay};
 use log_support as s;
-use std::fs::File;
-use std::io::{self, Seek, SeekFrom, Write};
-use std::path::Path;
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::atomic::Ordering;
 use std::sync::{Arc, Mutex};
 use tracing_subscriber::layer::SubscriberExt;
-
-/// A "disk" with a shared byte budget: writes past it fail with StorageFull.
-struct SmallDisk {
-    free: Arc<AtomicU64>,
-}
-
-struct SmallFile {
-    file: File,
-    free: Arc<AtomicU64>,
-}
-
-impl Write for SmallFile {
-    fn write(&mut self, buf: &[u8]) -> io::Result<usize> {
-        let free = self.free.load(Ordering::SeqCst);
-        if free == 0 {
-            return Err(io::Error::new(
-                io::ErrorKind::StorageFull,
-                "no space left on device (test disk)",
-            ));
-        }
-        let n = buf.len().min(free as usize);
-        let n = self.file.write(&buf[..n])?;
-        self.free.fetch_sub(n as u64, Ordering::SeqCst);
-        Ok(n)
-    }
-    fn flush(&mut self) -> io::Result<()> {
-        self.file.flush()
-    }
-}
-
-impl Seek for SmallFile {
-    fn seek(&mut self, pos: SeekFrom) -> io::Result<u64> {
-        self.file.seek(pos)
-    }
-}
-
-impl Storage for SmallDisk {
-    fn create(&mut self, path: &Path) -> io::Result<StorageFile> {
-        let file = File::create_new(path)?;
-        let sync = file.try_clone()?;
-        Ok(StorageFile {
-            writer: Box::new(SmallFile {
-                file,
-                free: self.free.clone(),
-            }),
-            sync: Box::new(move || sync.sync_data()),
-        })
-    }
-}
 
 /// Collects the messages of ERROR events from every thread.
 struct Errors(Arc<Mutex<Vec<String>>>);
@@ -91,23 +39,12 @@ fn a_full_disk_is_reported_the_caller_carries_on_and_the_file_stays_readable() {
     .unwrap();
 
     let dir = tempfile::tempdir().unwrap();
-    let free = Arc::new(AtomicU64::new(5_000_000)); // about 4 frames
-    let mut cfg = s::config();
-    cfg.retry_after_error_s = 1;
-    let log = FlightLog::start_with_storage(
-        &cfg,
-        dir.path(),
-        &s::camera(),
-        Box::new(SmallDisk { free: free.clone() }),
-    )
-    .unwrap();
+    // Room for about 4 frames.
+    let (log, free) = s::log_on_small_disk(dir.path(), 5_000_000, None);
 
     // 10 frames: the disk fills during the fifth. The caller never notices.
     for seq in 0..10 {
-        let m = Arc::new(s::measurement(seq));
-        let json = s::detection_json(&m);
-        log.frame(Arc::new(s::frame(seq, false)));
-        log.measurement_with_transforms(m, json, s::mount());
+        s::log_frame(&log, seq, false);
     }
     // Room again; after the retry delay logging resumes in part 001.
     std::thread::sleep(std::time::Duration::from_millis(300));

@@ -6,79 +6,17 @@
 
 mod log_support;
 
-use drogue_vision::log::{FlightLog, Storage, StorageFile, recover, replay};
+use drogue_vision::log::{recover, replay};
 use log_support as s;
-use std::fs::File;
-use std::io::{self, BufWriter, Seek, SeekFrom, Write};
-use std::path::Path;
 use std::sync::Arc;
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::atomic::Ordering;
 use std::time::Duration;
-
-/// A "disk" with a shared byte budget behind a 64 KiB write buffer.
-struct BufferedSmallDisk {
-    free: Arc<AtomicU64>,
-}
-
-struct SmallFile {
-    file: File,
-    free: Arc<AtomicU64>,
-}
-
-impl Write for SmallFile {
-    fn write(&mut self, buf: &[u8]) -> io::Result<usize> {
-        let free = self.free.load(Ordering::SeqCst);
-        if free == 0 {
-            return Err(io::Error::new(
-                io::ErrorKind::StorageFull,
-                "no space left on device (test disk)",
-            ));
-        }
-        let n = self.file.write(&buf[..buf.len().min(free as usize)])?;
-        self.free.fetch_sub(n as u64, Ordering::SeqCst);
-        Ok(n)
-    }
-    fn flush(&mut self) -> io::Result<()> {
-        self.file.flush()
-    }
-}
-
-impl Seek for SmallFile {
-    fn seek(&mut self, pos: SeekFrom) -> io::Result<u64> {
-        self.file.seek(pos)
-    }
-}
-
-impl Storage for BufferedSmallDisk {
-    fn create(&mut self, path: &Path) -> io::Result<StorageFile> {
-        let file = File::create_new(path)?;
-        let sync = file.try_clone()?;
-        Ok(StorageFile {
-            writer: Box::new(BufWriter::with_capacity(
-                64 << 10,
-                SmallFile {
-                    file,
-                    free: self.free.clone(),
-                },
-            )),
-            sync: Box::new(move || sync.sync_data()),
-        })
-    }
-}
 
 #[test]
 fn retries_on_a_full_disk_leave_no_empty_files() {
     let dir = tempfile::tempdir().unwrap();
-    let free = Arc::new(AtomicU64::new(3_000_000)); // about 2 frames
-    let mut cfg = s::config();
-    cfg.retry_after_error_s = 1;
-    let log = FlightLog::start_with_storage(
-        &cfg,
-        dir.path(),
-        &s::camera(),
-        Box::new(BufferedSmallDisk { free: free.clone() }),
-    )
-    .unwrap();
+    // Room for about 2 frames.
+    let (log, free) = s::log_on_small_disk(dir.path(), 3_000_000, Some(64 << 10));
     // Frames for ~3.5 s with the disk full after the second: three retries
     // find it still full.
     for seq in 0..35 {

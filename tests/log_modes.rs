@@ -179,11 +179,7 @@ fn crop_mode_logs_full_frames_every_nth_and_a_crop_around_the_drogue_on_every_fr
         .status()
         .expect("process");
     assert!(status.success());
-    let records: Vec<serde_json::Value> = std::fs::read_to_string(&out)
-        .expect("records")
-        .lines()
-        .map(|l| serde_json::from_str(l).expect("json"))
-        .collect();
+    let records = drogue_vision::testing::read_json_lines(&out);
     assert_eq!(records.len(), expected.len());
     assert!(records.iter().all(|r| r["detected"] == true));
 

@@ -6,7 +6,6 @@ use drogue_vision::link::LinkEvent;
 use drogue_vision::log::{FlightLog, LogError, review};
 use log_support as s;
 use std::path::{Path, PathBuf};
-use std::sync::Arc;
 use tracing_subscriber::layer::SubscriberExt;
 
 const FRAMES: u64 = 60;
@@ -23,10 +22,7 @@ const HEARTBEAT_S: [u64; 5] = [0, 1, 2, 8, 9];
 fn write(dir: &Path) -> PathBuf {
     let log = FlightLog::start(&s::config(), dir, &s::camera()).unwrap();
     for seq in logged_seqs() {
-        let m = Arc::new(s::measurement(seq));
-        let json = s::detection_json(&m);
-        log.frame_with_truth(Arc::new(s::frame(seq, true)), Some(Box::new(s::truth(seq))));
-        log.measurement_with_transforms(m, json, s::mount());
+        s::log_frame(&log, seq, true);
         log.mavlink(s::link_event(seq, true));
     }
     for k in HEARTBEAT_S {

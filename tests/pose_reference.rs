@@ -8,7 +8,8 @@
 //!
 //! Ignored by a plain `cargo test`; `.ci/run` runs it with
 //! `--include-ignored` where `DROGUE_REFERENCE_DIR` names the reference
-//! folder (the one with `paper10/`), and it fails when the variable is unset.
+//! folder (the one with `paper10/`), and it fails when the variable is unset
+//! or names a missing folder (`drogue_vision::testing::reference_set`).
 
 use drogue_vision::camera::CameraModel;
 use drogue_vision::config::Config;
@@ -17,41 +18,17 @@ use drogue_vision::measure::ambiguity::canopy_supports;
 use drogue_vision::measure::ellipse::Ellipse;
 use drogue_vision::measure::pose::{CirclePose, cone_pose};
 use drogue_vision::measure::track::Tracker;
+use drogue_vision::testing::{read_truths, reference_set};
 use nalgebra::Vector3;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use serde_json::Value;
-use std::path::PathBuf;
-
-/// The reference set `name` under `DROGUE_REFERENCE_DIR`. The tests that use
-/// it are `#[ignore]`d; run on purpose (`.ci/run` does), they fail loudly
-/// when the variable is unset or the set is missing.
-fn reference_set(name: &str) -> Option<PathBuf> {
-    let dir = std::env::var_os("DROGUE_REFERENCE_DIR")
-        .expect("DROGUE_REFERENCE_DIR is not set: it must name the reference frames' folder");
-    let set = PathBuf::from(dir).join(name);
-    assert!(
-        set.join("truth.jsonl").is_file(),
-        "DROGUE_REFERENCE_DIR is set but {} has no truth.jsonl",
-        set.display()
-    );
-    Some(set)
-}
-
-fn vec3(v: &Value) -> Vector3<f64> {
-    let a = v.as_array().expect("a 3-vector");
-    Vector3::new(
-        a[0].as_f64().unwrap(),
-        a[1].as_f64().unwrap(),
-        a[2].as_f64().unwrap(),
-    )
-}
 
 fn angle(a: &Vector3<f64>, b: &Vector3<f64>) -> f64 {
     a.cross(b).norm().atan2(a.dot(b))
 }
 
-/// One reference frame's truth, as used here.
+/// One reference frame's truth with the fields every `paper10` and
+/// `occlusion` frame has, taken out of its options.
 struct Truth {
     name: String,
     radius: f64,
@@ -65,29 +42,23 @@ struct Truth {
 }
 
 fn read_truth(set: &std::path::Path) -> Vec<Truth> {
-    let text = std::fs::read_to_string(set.join("truth.jsonl")).unwrap();
-    text.lines()
-        .filter(|l| !l.trim().is_empty())
-        .map(|line| {
-            let t: Value = serde_json::from_str(line).unwrap();
-            let e = &t["ellipse"];
-            let f = |v: &Value| v.as_f64().unwrap();
+    read_truths(set)
+        .into_iter()
+        .map(|t| {
+            let v = |a: Option<[f64; 3]>, what: &str| {
+                Vector3::from(a.unwrap_or_else(|| panic!("{}: no {what}", t.frame)))
+            };
+            let e = t.ellipse.expect("a truth ellipse");
             Truth {
-                name: t["frame"].as_str().unwrap().to_string(),
-                radius: f(&t["radius"]),
-                ellipse: Ellipse::new(
-                    f(&e["cx"]),
-                    f(&e["cy"]),
-                    f(&e["a"]),
-                    f(&e["b"]),
-                    f(&e["theta"]),
-                ),
-                position: vec3(&t["position_camera"]),
-                normal: vec3(&t["normal_camera"]),
-                alt_position: vec3(&t["alt_position_camera"]),
-                alt_normal: vec3(&t["alt_normal_camera"]),
-                tilt_deg: f(&t["tilt_deg"]),
-                range_m: f(&t["range_m"]),
+                radius: t.radius.expect("radius"),
+                ellipse: Ellipse::new(e.cx, e.cy, e.a, e.b, e.theta),
+                position: v(t.position_camera, "position_camera"),
+                normal: v(t.normal_camera, "normal_camera"),
+                alt_position: v(t.alt_position_camera, "alt_position_camera"),
+                alt_normal: v(t.alt_normal_camera, "alt_normal_camera"),
+                tilt_deg: t.tilt_deg.expect("tilt_deg"),
+                range_m: t.range_m.expect("range_m"),
+                name: t.frame,
             }
         })
         .collect()
@@ -113,11 +84,8 @@ fn gauss(rng: &mut ChaCha8Rng) -> f64 {
 /// Gaussian errors of `sigma_px` on centre and semi-axes (and the matching
 /// angle error, sigma_px / a): the accuracy of the answer given, counting the
 /// ambiguity, for fits of that quality.
-fn answer_given_with_fit_error(
-    set_name: &str,
-    sigma_px: f64,
-) -> Option<(Vec<f64>, Vec<f64>, RimStats)> {
-    let set = reference_set(set_name)?;
+fn answer_given_with_fit_error(set_name: &str, sigma_px: f64) -> (Vec<f64>, Vec<f64>, RimStats) {
+    let set = reference_set(set_name);
     let camera = CameraModel::load(&set.join("camera.yaml")).unwrap();
     let config = Config::embedded();
     let mut rng = ChaCha8Rng::seed_from_u64(21);
@@ -156,7 +124,7 @@ fn answer_given_with_fit_error(
     }
     normal_err_deg.sort_by(f64::total_cmp);
     position_err_pct.sort_by(f64::total_cmp);
-    Some((normal_err_deg, position_err_pct, stats))
+    (normal_err_deg, position_err_pct, stats)
 }
 
 fn percentile(sorted: &[f64], p: f64) -> f64 {
@@ -168,9 +136,7 @@ fn percentile(sorted: &[f64], p: f64) -> f64 {
 fn answer_given_with_realistic_fit_errors() {
     for set in ["paper10", "occlusion"] {
         for sigma_px in [0.05, 0.1, 0.2] {
-            let Some((normal, position, rim)) = answer_given_with_fit_error(set, sigma_px) else {
-                return;
-            };
+            let (normal, position, rim) = answer_given_with_fit_error(set, sigma_px);
             println!(
                 "{set}, ellipse error sigma {sigma_px} px: normal median {:.2} p95 {:.2} deg; \
                  position median {:.3} p95 {:.3} % of range; of {} answers, tilt > 5 deg: {rim:?}",
@@ -207,9 +173,7 @@ fn occlusion_truth_ellipse_gives_truth_pose_and_rim_picks_it() {
 }
 
 fn truth_ellipse_gives_truth_pose_and_rim_picks_it(set_name: &str) {
-    let Some(set) = reference_set(set_name) else {
-        return;
-    };
+    let set = reference_set(set_name);
     let camera = CameraModel::load(&set.join("camera.yaml")).unwrap();
     let config = Config::embedded();
     let canopy_radius = config.drogue.canopy_radius_m;

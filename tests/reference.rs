@@ -7,39 +7,16 @@
 
 mod common;
 
-use common::{FrameErrors, Truth, errors, med_p95, reference_dir, report};
-use drogue_vision::camera::CameraModel;
+use common::{FrameErrors, errors, measure_reference_set, med_p95, report};
 use drogue_vision::config::Config;
-use drogue_vision::frame::{Frame, FrameOrigin};
-use drogue_vision::image_io::read_gray8;
-use drogue_vision::measure::Measurer;
+use drogue_vision::testing::{Truth, read_json_lines, read_truths, reference_set};
 use std::path::Path;
-
-fn truths(set: &Path) -> Vec<Truth> {
-    let text = std::fs::read_to_string(set.join("truth.jsonl")).expect("truth.jsonl");
-    text.lines()
-        .filter(|l| !l.trim().is_empty())
-        .map(|l| serde_json::from_str(l).expect("truth line"))
-        .collect()
-}
 
 /// Measures every frame of a set as an unrelated view; (truth, errors or None).
 fn measure_set(set: &Path, config: &Config) -> Vec<(Truth, Option<FrameErrors>, bool)> {
-    let camera = CameraModel::load(&set.join("camera.yaml")).expect("camera.yaml");
-    let mut measurer = Measurer::new(camera, &config.measure()).expect("measurer");
-    truths(set)
+    measure_reference_set(set, config)
         .into_iter()
-        .enumerate()
-        .map(|(seq, t)| {
-            let path = set.join(&t.frame);
-            let image = read_gray8(&path, None).expect("reference frame");
-            measurer.forget_track();
-            let m = measurer.measure(&Frame {
-                seq: seq as u64,
-                capture_time_ns: 0,
-                image,
-                origin: FrameOrigin::File(path),
-            });
+        .map(|(t, m)| {
             let detected = m.detection.is_some();
             let e = errors(&m, &t);
             (t, e, detected)
@@ -50,11 +27,10 @@ fn measure_set(set: &Path, config: &Config) -> Vec<(Truth, Option<FrameErrors>, 
 #[test]
 #[ignore = "needs the reference frames: set DROGUE_REFERENCE_DIR (.ci/run does)"]
 fn reference_paper10_and_occlusion_meet_targets() {
-    let dir = reference_dir();
     let config = Config::embedded();
     let mut all = Vec::new();
     for set in ["paper10", "occlusion"] {
-        let results = measure_set(&dir.join(set), &config);
+        let results = measure_set(&reference_set(set), &config);
         let missed: Vec<&str> = results
             .iter()
             .filter(|(t, _, d)| t.expect == "detect" && !d)
@@ -88,9 +64,8 @@ fn reference_paper10_and_occlusion_meet_targets() {
 #[test]
 #[ignore = "needs the reference frames: set DROGUE_REFERENCE_DIR (.ci/run does)"]
 fn reference_normal_with_outer_rim_visible() {
-    let dir = reference_dir();
     // paper10: the whole canopy is in view on every frame.
-    let results = measure_set(&dir.join("paper10"), &Config::embedded());
+    let results = measure_set(&reference_set("paper10"), &Config::embedded());
     let errs: Vec<FrameErrors> = results.iter().filter_map(|(_, e, _)| *e).collect();
     let (n50, n95) = med_p95(&errs, |e| Some(e.normal_deg));
     eprintln!("paper10 normal (answer given): median {n50:.3} deg, p95 {n95:.3} deg");
@@ -100,8 +75,7 @@ fn reference_normal_with_outer_rim_visible() {
 #[test]
 #[ignore = "needs the reference frames: set DROGUE_REFERENCE_DIR (.ci/run does)"]
 fn reference_negative_gives_no_detection() {
-    let dir = reference_dir();
-    let results = measure_set(&dir.join("negative"), &Config::embedded());
+    let results = measure_set(&reference_set("negative"), &Config::embedded());
     let false_hits: Vec<&str> = results
         .iter()
         .filter(|(_, _, d)| *d)
@@ -116,8 +90,7 @@ fn reference_negative_gives_no_detection() {
 #[test]
 #[ignore = "needs the reference frames: set DROGUE_REFERENCE_DIR (.ci/run does)"]
 fn reference_badinput_handled_as_expected() {
-    let dir = reference_dir();
-    let set = dir.join("badinput");
+    let set = reference_set("badinput");
     let out = tempfile::tempdir().expect("tmp");
     let jsonl = out.path().join("out.jsonl");
     let status = std::process::Command::new(env!("CARGO_BIN_EXE_drogue-vision"))
@@ -129,12 +102,8 @@ fn reference_badinput_handled_as_expected() {
         .status()
         .expect("run process");
     assert!(status.success(), "process exit {status:?}");
-    let records: Vec<serde_json::Value> = std::fs::read_to_string(&jsonl)
-        .expect("output")
-        .lines()
-        .map(|l| serde_json::from_str(l).expect("json line"))
-        .collect();
-    for t in truths(&set) {
+    let records = read_json_lines(&jsonl);
+    for t in read_truths(&set) {
         let rec = records.iter().find(|r| r["frame"] == t.frame.as_str());
         let detected = rec.is_some_and(|r| r["detected"] == true);
         let error = rec.is_some_and(|r| r.get("error").is_some());

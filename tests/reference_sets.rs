@@ -9,12 +9,10 @@
 
 mod common;
 
-use common::{Truth, angle_deg, quantile, reference_dir, v3};
-use drogue_vision::camera::CameraModel;
+use common::{angle_deg, measure_reference_set, quantile, v3};
 use drogue_vision::config::Config;
-use drogue_vision::frame::{Frame, FrameOrigin};
-use drogue_vision::image_io::read_gray8;
-use drogue_vision::measure::{Disambiguation, Measurer};
+use drogue_vision::measure::Disambiguation;
+use drogue_vision::testing::reference_set;
 use std::path::Path;
 
 /// Floors per set: smallest detection share of the `detect` frames, most
@@ -64,29 +62,9 @@ struct SetResult {
     position_pct: Vec<f64>,
 }
 
-fn truths(set: &Path) -> Vec<Truth> {
-    std::fs::read_to_string(set.join("truth.jsonl"))
-        .expect("truth.jsonl")
-        .lines()
-        .filter(|l| !l.trim().is_empty())
-        .map(|l| serde_json::from_str(l).expect("truth line"))
-        .collect()
-}
-
 fn measure_set(set: &Path) -> SetResult {
-    let camera = CameraModel::load(&set.join("camera.yaml")).expect("camera.yaml");
-    let mut measurer = Measurer::new(camera, &Config::embedded().measure()).expect("measurer");
     let mut r = SetResult::default();
-    for (seq, t) in truths(set).into_iter().enumerate() {
-        let path = set.join(&t.frame);
-        let image = read_gray8(&path, None).expect("reference frame");
-        measurer.forget_track();
-        let m = measurer.measure(&Frame {
-            seq: seq as u64,
-            capture_time_ns: 0,
-            image,
-            origin: FrameOrigin::File(path),
-        });
+    for (t, m) in measure_reference_set(set, &Config::embedded()) {
         let Some(d) = m.detection else {
             if t.expect == "detect" {
                 r.expected += 1;
@@ -129,10 +107,9 @@ fn measure_set(set: &Path) -> SetResult {
 #[test]
 #[ignore = "needs the reference frames: set DROGUE_REFERENCE_DIR (.ci/run does)"]
 fn every_reference_set_meets_its_floor() {
-    let root = reference_dir();
     let mut failures = Vec::new();
     for f in &FLOORS {
-        let r = measure_set(&root.join(f.set));
+        let r = measure_set(&reference_set(f.set));
         let share = if r.expected == 0 {
             1.0
         } else {

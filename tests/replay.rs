@@ -72,11 +72,7 @@ fn replaying_a_log_reproduces_its_detections_exactly() {
         .status()
         .expect("process");
     assert!(status.success());
-    let replayed: Vec<serde_json::Value> = std::fs::read_to_string(&out)
-        .expect("replay")
-        .lines()
-        .map(|l| serde_json::from_str(l).expect("json line"))
-        .collect();
+    let replayed = drogue_vision::testing::read_json_lines(&out);
     assert_eq!(replayed.len(), logged.len());
     for r in &replayed {
         let seq: u64 = r["frame"].as_str().expect("frame").parse().expect("seq");

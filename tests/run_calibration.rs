@@ -5,6 +5,7 @@
 //! `mcap:` and `sim:` sources and by `process`. Truth: the simulator's
 //! `truth.jsonl`.
 
+use drogue_vision::testing::read_json_lines;
 use std::path::Path;
 use std::process::{Command, Output};
 
@@ -36,14 +37,6 @@ fn sim(out: &Path, scenario: &str, frames: u32) {
         .unwrap());
 }
 
-fn lines(path: &Path) -> Vec<serde_json::Value> {
-    std::fs::read_to_string(path)
-        .unwrap()
-        .lines()
-        .map(|l| serde_json::from_str(l).unwrap())
-        .collect()
-}
-
 fn vec3(v: &serde_json::Value) -> [f64; 3] {
     let a = v.as_array().expect("an array");
     [0, 1, 2].map(|k| a[k].as_f64().unwrap())
@@ -72,8 +65,8 @@ fn sim_then_process_with_its_mount_matches_the_truth() {
         .arg(&out)
         .output()
         .unwrap());
-    let truth = lines(&frames.join("truth.jsonl"));
-    let measured = lines(&out);
+    let truth = read_json_lines(&frames.join("truth.jsonl"));
+    let measured = read_json_lines(&out);
     let mut rel = Vec::new();
     for m in &measured {
         let Some(t) = truth.iter().find(|t| t["frame"] == m["frame"]) else {

@@ -188,6 +188,44 @@ fn window(s: f64, before_s: f64, after_s: f64, step_s: f64) -> Vec<f64> {
     (0..=n).map(|k| s - before_s + k as f64 * step_s).collect()
 }
 
+/// `run` on the simulated `scenario` with the autopilot's pose
+/// (`--vehicle-pose mavlink`) from `autopilot`, `config` laid over the
+/// default, logging to `tmp/logs`; it must end well. The LANDING_TARGETs the
+/// autopilot received and the run's stderr.
+fn closed_loop_run(
+    tmp: &std::path::Path,
+    scenario: &std::path::Path,
+    config: &std::path::Path,
+    autopilot: Autopilot,
+) -> (Vec<Received>, String) {
+    let PeerRun {
+        status,
+        received,
+        stderr,
+    } = run_with_peer(
+        &[
+            "--source".into(),
+            format!("sim:{}", scenario.display()),
+            "--vehicle-pose".into(),
+            "mavlink".into(),
+        ],
+        autopilot,
+        &tmp.join("logs"),
+        config,
+        &tmp.join("stderr.txt"),
+    );
+    assert!(status.success(), "run ended with {status:?}:\n{stderr}");
+    (received, stderr)
+}
+
+/// The simulator's truth of every logged frame (`/sim/truth`).
+fn logged_truths(log: &[Logged]) -> Vec<Truth> {
+    log.iter()
+        .filter(|m| m.topic == "/sim/truth")
+        .map(|m| serde_json::from_slice(&m.data).unwrap())
+        .collect()
+}
+
 #[derive(serde::Deserialize)]
 struct Truth {
     capture_time_ns: u64,
@@ -225,33 +263,13 @@ fn the_view_and_landing_target_ned_follow_the_autopilot() {
         (!(SILENT_S.0..SILENT_S.1).contains(&s)).then(|| scripted(s))
     });
     let autopilot = Autopilot::start(Some(script), 50.0);
-    let PeerRun {
-        status,
-        received,
-        stderr,
-    } = run_with_peer(
-        &[
-            "--source".into(),
-            format!("sim:{}", scenario.display()),
-            "--vehicle-pose".into(),
-            "mavlink".into(),
-        ],
-        autopilot,
-        &logs,
-        &config,
-        &tmp.path().join("stderr.txt"),
-    );
-    assert!(status.success(), "run ended with {status:?}:\n{stderr}");
+    let (received, stderr) = closed_loop_run(tmp.path(), &scenario, &config, autopilot);
 
     // Every frame is logged, each with its truth in the autopilot's frame.
     let frames = frames_in_summary(&stderr);
     let log = read_log(&only_log(&logs));
     let images = log.iter().filter(|m| m.topic == "/camera/image").count() as u64;
-    let truths: Vec<Truth> = log
-        .iter()
-        .filter(|m| m.topic == "/sim/truth")
-        .map(|m| serde_json::from_slice(&m.data).unwrap())
-        .collect();
+    let truths = logged_truths(&log);
     assert_eq!(images, frames);
     assert_eq!(truths.len() as u64, frames);
     // Frames the rendering was too late for are dropped (as a camera drops
@@ -438,23 +456,7 @@ fn world_anchor_vehicle_flying_with_the_tanker() {
     };
     let script: Script = Arc::new(move |now_ns| Some(flown(secs(now_ns))));
     let autopilot = Autopilot::start(Some(script), 50.0);
-    let PeerRun {
-        status,
-        received,
-        stderr,
-    } = run_with_peer(
-        &[
-            "--source".into(),
-            format!("sim:{}", scenario.display()),
-            "--vehicle-pose".into(),
-            "mavlink".into(),
-        ],
-        autopilot,
-        &logs,
-        &config,
-        &tmp.path().join("stderr.txt"),
-    );
-    assert!(status.success(), "run ended with {status:?}:\n{stderr}");
+    let (received, _) = closed_loop_run(tmp.path(), &scenario, &config, autopilot);
 
     // The drogue at a capture time, autopilot NED: ahead of the vehicle's
     // track by the scenario's pre-contact offset, moving with it.
@@ -467,11 +469,7 @@ fn world_anchor_vehicle_flying_with_the_tanker() {
         add(track, offset)
     };
     let log = read_log(&only_log(&logs));
-    let truths: Vec<Truth> = log
-        .iter()
-        .filter(|m| m.topic == "/sim/truth")
-        .map(|m| serde_json::from_slice(&m.data).unwrap())
-        .collect();
+    let truths = logged_truths(&log);
     assert!(truths.len() >= 150, "{} frames", truths.len());
     let mut receiver_ok = 0;
     for t in &truths {

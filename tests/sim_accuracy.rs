@@ -3,12 +3,13 @@
 
 mod common;
 
-use common::{FrameErrors, Truth, errors, med_p95, report};
+use common::{FrameErrors, errors, med_p95, report};
 use drogue_sim::{Scenario, Simulator};
 use drogue_vision::config::Config;
 use drogue_vision::frame::{Frame, FrameOrigin};
 use drogue_vision::measure::Measurer;
 use drogue_vision::source::sim::{camera_model, mount_config};
+use drogue_vision::testing::Truth;
 
 /// Outcome of measuring a stretch of a scenario.
 struct Run {

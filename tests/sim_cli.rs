@@ -28,11 +28,7 @@ fn sim_writes_frames_truth_and_camera() {
         assert_eq!(img.color(), image::ColorType::L8);
     }
     assert!(!out.join("frame_000003.png").exists());
-    let truth = std::fs::read_to_string(out.join("truth.jsonl")).unwrap();
-    let lines: Vec<serde_json::Value> = truth
-        .lines()
-        .map(|l| serde_json::from_str(l).unwrap())
-        .collect();
+    let lines = drogue_vision::testing::read_json_lines(&out.join("truth.jsonl"));
     assert_eq!(lines.len(), 3);
     for (k, t) in lines.iter().enumerate() {
         assert_eq!(t["frame"], format!("frame_{k:06}.png"));

@@ -1,41 +1,41 @@
 //! Shared helpers of the integration tests: truth comparison and statistics.
 //! Every expected value comes from the simulator's or the reference data's
-//! truth, never from the code under test.
+//! truth, never from the code under test. The reference folder, its truth
+//! records and the fixtures that benches share too are in
+//! `drogue_vision::testing`.
 #![allow(dead_code)]
 
-use drogue_vision::measure::Measurement;
-use drogue_vision::measure::ellipse::Ellipse;
+use drogue_vision::camera::CameraModel;
+use drogue_vision::config::Config;
+use drogue_vision::frame::{Frame, FrameOrigin};
+use drogue_vision::image_io::read_gray8;
+use drogue_vision::measure::{Measurement, Measurer};
+use drogue_vision::testing::{Truth, read_truths};
 use nalgebra::Vector3;
-use std::path::PathBuf;
+use std::path::Path;
 
-/// The reference frames' folder from `DROGUE_REFERENCE_DIR`. These tests are
-/// `#[ignore]`d; run on purpose, they fail loudly when the variable is unset
-/// or names a missing folder, so that they can never pass without running.
-pub fn reference_dir() -> PathBuf {
-    let d = std::env::var_os("DROGUE_REFERENCE_DIR")
-        .map(PathBuf::from)
-        .expect("DROGUE_REFERENCE_DIR is not set: it must name the reference frames' folder");
-    assert!(
-        d.join("paper10").is_dir(),
-        "DROGUE_REFERENCE_DIR={} is not the reference frames' folder (no paper10/ in it)",
-        d.display()
-    );
-    d
-}
-
-/// Truth of one frame, as the reference `truth.jsonl` and the simulator give it.
-#[derive(Clone, Debug, serde::Deserialize)]
-pub struct Truth {
-    pub frame: String,
-    pub expect: String,
-    pub ellipse: Option<Ellipse>,
-    pub position_camera: Option<[f64; 3]>,
-    pub normal_camera: Option<[f64; 3]>,
-    pub alt_normal_camera: Option<[f64; 3]>,
-    pub range_m: Option<f64>,
-    pub tilt_deg: Option<f64>,
-    pub probe_rim_frac: Option<f64>,
-    pub position_body: Option<[f64; 3]>,
+/// Measures every frame of a reference set (its `camera.yaml`, its
+/// `truth.jsonl` order) as an unrelated view: the track is forgotten before
+/// each frame, so no frame borrows from the one before.
+pub fn measure_reference_set(set: &Path, config: &Config) -> Vec<(Truth, Measurement)> {
+    let camera = CameraModel::load(&set.join("camera.yaml")).expect("camera.yaml");
+    let mut measurer = Measurer::new(camera, &config.measure()).expect("measurer");
+    read_truths(set)
+        .into_iter()
+        .enumerate()
+        .map(|(seq, t)| {
+            let path = set.join(&t.frame);
+            let image = read_gray8(&path, None).expect("reference frame");
+            measurer.forget_track();
+            let m = measurer.measure(&Frame {
+                seq: seq as u64,
+                capture_time_ns: 0,
+                image,
+                origin: FrameOrigin::File(path),
+            });
+            (t, m)
+        })
+        .collect()
 }
 
 /// Errors of one detected frame against its truth.

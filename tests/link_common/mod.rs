@@ -1,35 +1,89 @@
 //! Shared helpers for the link integration tests: hand-built measurements
-//! with known values, and a MAVLink peer that frames and parses with the
-//! `mavlink` crate's own reader and writer (independent of `link::frame`).
+//! with known values (the fixtures of `drogue_vision::testing`), and a
+//! MAVLink peer that frames and parses with the `mavlink` crate's own reader
+//! and writer (independent of `link::frame`).
 #![allow(dead_code)]
 
 use drogue_vision::config::Config;
-use drogue_vision::link::LinkConfig;
-use drogue_vision::measure::ellipse::Ellipse;
-use drogue_vision::measure::{
-    CirclePose, Detection, Disambiguation, FitQuality, Measurement, StageTimes,
-};
-use drogue_vision::spatial::{Direction, Point};
-use mavlink::dialects::ardupilotmega::{
-    ATTITUDE_DATA, HEARTBEAT_DATA, LOCAL_POSITION_NED_DATA, MavAutopilot, MavMessage, MavModeFlag,
-    MavState, MavType,
-};
+use drogue_vision::link::{LinkConfig, LinkHandle};
+use drogue_vision::measure::{Detection, Measurement};
+use drogue_vision::testing;
+use mavlink::dialects::ardupilotmega::{LANDING_TARGET_DATA, MavMessage};
 use mavlink::{MavHeader, MavlinkVersion, SigningData};
-use nalgebra::{Matrix3, Vector3};
-use std::net::{SocketAddr, UdpSocket};
+use std::io::Read;
+use std::net::{SocketAddr, TcpListener, UdpSocket};
 use std::sync::Arc;
-use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
-
-pub fn unix_now_ns() -> u64 {
-    SystemTime::now()
-        .duration_since(UNIX_EPOCH)
-        .unwrap()
-        .as_nanos() as u64
-}
+use std::time::{Duration, Instant};
 
 /// The embedded default `[link]`, for the test to adjust.
 pub fn link_config() -> LinkConfig {
     Config::embedded().link
+}
+
+// Not every test uses every helper (as `dead_code` above).
+#[allow(unused_imports)]
+pub use drogue_vision::{
+    clock::unix_now_ns,
+    testing::{detection, heartbeat},
+};
+
+/// [`testing::measurement`], shared as the link takes it.
+pub fn measurement(
+    seq: u64,
+    capture_time_ns: u64,
+    detection: Option<Detection>,
+) -> Arc<Measurement> {
+    Arc::new(testing::measurement(seq, capture_time_ns, detection))
+}
+
+/// An ArduPilot quadrotor's HEARTBEAT (flight mode 4, GUIDED).
+pub fn autopilot_heartbeat() -> MavMessage {
+    testing::autopilot_heartbeat(4)
+}
+
+/// Submits a detection `range_m` straight ahead, its axis back at the
+/// vehicle, captured now; returns the capture time (ns since the epoch).
+pub fn submit_ahead(link: &LinkHandle, seq: u64, range_m: f64, track_epoch: u32) -> u64 {
+    let capture = unix_now_ns();
+    let ahead = detection([range_m, 0.0, 0.0], [-1.0, 0.0, 0.0], track_epoch);
+    link.submit(measurement(seq, capture, Some(ahead)));
+    capture
+}
+
+/// A loopback UDP port nobody listens on (bound, then released).
+pub fn free_udp_port() -> u16 {
+    UdpSocket::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port()
+}
+
+/// A loopback TCP port nobody listens on (bound, then released).
+pub fn free_tcp_port() -> u16 {
+    TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port()
+}
+
+/// Every LANDING_TARGET among `msgs`, in order.
+pub fn landing_targets_in(msgs: &[MavMessage]) -> Vec<LANDING_TARGET_DATA> {
+    msgs.iter()
+        .filter_map(|m| match m {
+            MavMessage::LANDING_TARGET(l) => Some(l.clone()),
+            _ => None,
+        })
+        .collect()
+}
+
+/// The `time_usec` of every LANDING_TARGET among `msgs`, in order.
+pub fn landing_target_times(msgs: &[MavMessage]) -> Vec<u64> {
+    landing_targets_in(msgs)
+        .iter()
+        .map(|l| l.time_usec)
+        .collect()
 }
 
 pub fn runtime() -> tokio::runtime::Runtime {
@@ -40,89 +94,14 @@ pub fn runtime() -> tokio::runtime::Runtime {
         .unwrap()
 }
 
-/// A detection with the given drogue centre and normal (body FRD), the
-/// default forward-looking mount (camera x = body y, y = body z, z = body x).
-pub fn detection(position_body_m: [f64; 3], normal_body: [f64; 3], epoch: u32) -> Detection {
-    let p = Vector3::from(position_body_m);
-    let n = Vector3::from(normal_body);
-    Detection {
-        ellipse_px: Ellipse {
-            cx: 640.0,
-            cy: 480.0,
-            a: 40.0,
-            b: 38.0,
-            theta: 0.0,
-        },
-        pose_camera: CirclePose {
-            centre_camera_m: Vector3::new(p.y, p.z, p.x),
-            normal_camera: Vector3::new(n.y, n.z, n.x),
-        },
-        alt_pose_camera: None,
-        disambiguation: Disambiguation::CanopyRim,
-        position_body_m: Point::new(p),
-        normal_body: Direction::new(n),
-        position_from_probe_body_m: Point::new(p),
-        position_cov_body_m2: Matrix3::from_diagonal(&Vector3::new(4e-4, 1e-5, 2e-5)),
-        normal_sigma_rad: 0.02,
-        quality: FitQuality {
-            points: 200,
-            inliers: 180,
-            rms_residual_px: 0.3,
-            score: 0.8,
-        },
-        track_epoch: epoch,
-        rim_points_px: vec![],
-        inliers: vec![],
-    }
-}
-
-pub fn measurement(
-    seq: u64,
-    capture_time_ns: u64,
-    detection: Option<Detection>,
-) -> Arc<Measurement> {
-    Arc::new(Measurement {
-        seq,
-        capture_time_ns,
-        detection,
-        tracked: false,
-        times: StageTimes::default(),
-    })
-}
-
-pub fn autopilot_heartbeat() -> MavMessage {
-    MavMessage::HEARTBEAT(HEARTBEAT_DATA {
-        custom_mode: 4,
-        mavtype: MavType::MAV_TYPE_QUADROTOR,
-        autopilot: MavAutopilot::MAV_AUTOPILOT_ARDUPILOTMEGA,
-        base_mode: MavModeFlag::empty(),
-        system_status: MavState::MAV_STATE_ACTIVE,
-        mavlink_version: 3,
-    })
-}
-
+/// ATTITUDE at boot time 1 s.
 pub fn attitude(roll: f32, pitch: f32, yaw: f32) -> MavMessage {
-    MavMessage::ATTITUDE(ATTITUDE_DATA {
-        time_boot_ms: 1000,
-        roll,
-        pitch,
-        yaw,
-        rollspeed: 0.0,
-        pitchspeed: 0.0,
-        yawspeed: 0.0,
-    })
+    testing::attitude(1000, [roll, pitch, yaw])
 }
 
+/// LOCAL_POSITION_NED at boot time 1 s, at rest.
 pub fn local_position(x: f32, y: f32, z: f32) -> MavMessage {
-    MavMessage::LOCAL_POSITION_NED(LOCAL_POSITION_NED_DATA {
-        time_boot_ms: 1000,
-        x,
-        y,
-        z,
-        vx: 0.0,
-        vy: 0.0,
-        vz: 0.0,
-    })
+    testing::local_position_ned(1000, [x, y, z])
 }
 
 /// One message as the peer saw it.
@@ -154,6 +133,29 @@ pub fn parse_all(bytes: &[u8], signing: Option<&SigningData>) -> Vec<(MavHeader,
         out.push(m);
     }
     out
+}
+
+/// Reads a byte stream from the link (a TCP connection, a serial port's
+/// master end; with a read timeout, so that `limit` holds) into `bytes`
+/// until the messages parsed from all of it satisfy `done` or `limit`
+/// passes, and returns those messages.
+pub fn collect_stream(
+    stream: &mut impl Read,
+    bytes: &mut Vec<u8>,
+    limit: Duration,
+    mut done: impl FnMut(&[MavMessage]) -> bool,
+) -> Vec<MavMessage> {
+    let end = Instant::now() + limit;
+    let mut buf = [0u8; 4096];
+    loop {
+        let msgs: Vec<MavMessage> = parse_all(bytes, None).into_iter().map(|m| m.1).collect();
+        if done(&msgs) || Instant::now() > end {
+            return msgs;
+        }
+        if let Ok(n) = stream.read(&mut buf) {
+            bytes.extend_from_slice(&buf[..n]);
+        }
+    }
 }
 
 /// The autopilot end of a UDP link, on 127.0.0.1.
@@ -233,7 +235,7 @@ impl UdpPeer {
     }
 }
 
-pub fn landing_targets(got: &[Got]) -> Vec<mavlink::dialects::ardupilotmega::LANDING_TARGET_DATA> {
+pub fn landing_targets(got: &[Got]) -> Vec<LANDING_TARGET_DATA> {
     got.iter()
         .filter_map(|g| match &g.message {
             MavMessage::LANDING_TARGET(d) => Some(d.clone()),

@@ -3,19 +3,23 @@
 //! compared with what went in.
 #![allow(dead_code)]
 
-use drogue_sim::{FrameTruth, TruthEllipse};
+use drogue_sim::FrameTruth;
 use drogue_vision::camera::CameraModel;
 use drogue_vision::frame::{Frame, FrameOrigin};
 use drogue_vision::link::LinkEvent;
-use drogue_vision::log::{LogConfig, MountTransforms};
+use drogue_vision::log::{FlightLog, LogConfig, LogHandle, MountTransforms, Storage, StorageFile};
 use drogue_vision::measure::ellipse::Ellipse;
-use drogue_vision::measure::{
-    CirclePose, Detection, Disambiguation, FitQuality, Measurement, StageTimes,
-};
+use drogue_vision::measure::{Detection, FitQuality, Measurement, StageTimes};
 use drogue_vision::record::DetectionRecord;
-use drogue_vision::spatial::{Direction, Point};
+use drogue_vision::spatial::Point;
+use drogue_vision::testing;
 use image::GrayImage;
 use nalgebra::{Matrix3, Vector3};
+use std::fs::File;
+use std::io::{self, BufWriter, Seek, SeekFrom, Write};
+use std::path::Path;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
 
 pub const WIDTH: u32 = 1280;
 pub const HEIGHT: u32 = 960;
@@ -25,15 +29,7 @@ pub const PERIOD_NS: u64 = 33_333_333;
 
 /// The paper's camera (the reference data's intrinsics) with some distortion.
 pub fn camera() -> CameraModel {
-    let k = Matrix3::new(1336.2, 0.0, 646.3, 0.0, 1335.4, 473.8, 0.0, 0.0, 1.0);
-    CameraModel::new(
-        "test",
-        WIDTH,
-        HEIGHT,
-        k,
-        [-0.05, 0.01, 0.0002, -0.0001, 0.0],
-    )
-    .unwrap()
+    testing::paper_camera([-0.05, 0.01, 0.0002, -0.0001, 0.0])
 }
 
 /// The embedded log settings with a queue that holds everything one test
@@ -47,15 +43,9 @@ pub fn config() -> LogConfig {
     cfg
 }
 
-/// Noise-like pixels that differ for every frame (an xorshift of seq, x, y).
+/// Noise-like pixels that differ for every frame.
 pub fn image(seq: u64, width: u32, height: u32) -> GrayImage {
-    let mut s = seq.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1;
-    GrayImage::from_fn(width, height, |_, _| {
-        s ^= s << 13;
-        s ^= s >> 7;
-        s ^= s << 17;
-        image::Luma([(s >> 24) as u8])
-    })
+    testing::noise_image(seq, width, height)
 }
 
 pub fn time_ns(seq: u64) -> u64 {
@@ -73,41 +63,7 @@ pub fn normal_camera(seq: u64) -> Vector3<f64> {
 }
 
 pub fn truth(seq: u64) -> FrameTruth {
-    let c = centre_camera_m(seq);
-    let n = normal_camera(seq);
-    FrameTruth {
-        frame: format!("frame_{seq:06}.png"),
-        seq,
-        t: seq as f64 / 30.0,
-        expect: "detect".into(),
-        radius: 0.15,
-        position_camera: c.into(),
-        normal_camera: n.into(),
-        alt_position_camera: c.into(),
-        alt_normal_camera: [-n.x, -n.y, n.z],
-        ellipse: Some(TruthEllipse {
-            cx: 646.3,
-            cy: 473.8,
-            a: 10.0,
-            b: 9.0,
-            theta: 0.1,
-        }),
-        range_m: c.norm(),
-        tilt_deg: 5.0,
-        probe_rim_frac: 0.0,
-        hose_rim_frac: 0.0,
-        rim_fully_in_image: true,
-        position_body: [c.z, c.x, c.y],
-        normal_body: [n.z, n.x, n.y],
-        ned_frame: drogue_sim::NED_FRAME_SCENARIO.into(),
-        position_ned: [100.0, 0.0, -50.0],
-        receiver_position_ned: [80.0, 0.0, -50.0],
-        receiver_q_ned_body: [1.0, 0.0, 0.0, 0.0],
-        capture_time_ns: time_ns(seq),
-        canopy_radius: 0.33,
-        visible_rim_frac: 1.0,
-        coupled: false,
-    }
+    testing::frame_truth(seq, centre_camera_m(seq), normal_camera(seq), time_ns(seq))
 }
 
 pub fn frame(seq: u64, with_truth: bool) -> Frame {
@@ -138,16 +94,10 @@ pub fn measurement(seq: u64) -> Measurement {
                 [640.0 + 30.0 * t.cos(), 480.0 + 25.0 * t.sin()]
             })
             .collect();
+        // Body FRD of the default forward-looking mount, as the fixture's.
+        let body = |v: Vector3<f64>| Vector3::new(v.z, v.x, v.y);
         Detection {
             ellipse_px: Ellipse::new(640.0, 480.0, 30.0, 25.0, 0.1),
-            pose_camera: CirclePose {
-                centre_camera_m: centre,
-                normal_camera: normal,
-            },
-            alt_pose_camera: None,
-            disambiguation: Disambiguation::CanopyRim,
-            position_body_m: Point::new(Vector3::new(centre.z, centre.x, centre.y)),
-            normal_body: Direction::new(Vector3::new(normal.z, normal.x, normal.y)),
             position_from_probe_body_m: Point::new(Vector3::new(
                 centre.z - 1.0,
                 centre.x,
@@ -161,15 +111,12 @@ pub fn measurement(seq: u64) -> Measurement {
                 rms_residual_px: 0.3,
                 score: 0.9,
             },
-            track_epoch: 1,
             inliers: (0..40u32).map(|i| !i.is_multiple_of(20)).collect(),
             rim_points_px: rim,
+            ..testing::detection(body(centre), body(normal), 1)
         }
     });
     Measurement {
-        seq,
-        capture_time_ns: time_ns(seq),
-        detection,
         tracked: seq > 0,
         times: StageTimes {
             detect_us: 1000,
@@ -177,12 +124,25 @@ pub fn measurement(seq: u64) -> Measurement {
             pose_us: 100,
             total_us: 1600 + (seq as u32 % 10) * 100,
         },
+        ..testing::measurement(seq, time_ns(seq), detection)
     }
 }
 
 /// Position error along camera x built into [`measurement`], metres.
 pub fn error_m(seq: u64) -> f64 {
     0.01 * (1 + seq % 3) as f64
+}
+
+/// Logs frame `seq` (with its truth or not) and then its [`measurement`]
+/// with the detection JSON and the mount's transforms, as `run` does.
+pub fn log_frame(log: &LogHandle, seq: u64, with_truth: bool) {
+    let m = Arc::new(measurement(seq));
+    let json = detection_json(&m);
+    log.frame_with_truth(
+        Arc::new(frame(seq, with_truth)),
+        with_truth.then(|| Box::new(truth(seq))),
+    );
+    log.measurement_with_transforms(m, json, mount());
 }
 
 pub fn detection_json(m: &Measurement) -> serde_json::Value {
@@ -195,13 +155,7 @@ pub fn latency_ms(i: u64) -> f64 {
 }
 
 pub fn mount() -> MountTransforms {
-    MountTransforms {
-        camera_in_body_m: [1.5, 0.0, -0.2],
-        // Camera looking forward: R_body_cam0 (cam x = body y, cam y = body z,
-        // cam z = body x) as a quaternion, w first.
-        q_body_camera: [0.5, 0.5, 0.5, 0.5],
-        probe_in_body_m: [3.0, 0.4, -0.5],
-    }
+    testing::mount_transforms()
 }
 
 pub fn link_event(i: u64, outgoing: bool) -> LinkEvent {
@@ -221,5 +175,81 @@ pub fn link_event(i: u64, outgoing: bool) -> LinkEvent {
         .into(),
         capture_time_ns: outgoing.then(|| time_ns(i)),
         fields: serde_json::json!({"i": i, "x": 1.5}),
+    }
+}
+
+/// A "disk" with a shared byte budget (`free`): writes past it fail with
+/// `StorageFull`, as a full disk's do; raise `free` to give room back. With
+/// `buffer_bytes`, each file sits behind a write buffer of that size, as the
+/// real file storage's does (a new file's header then fails only when the
+/// buffer is written out).
+pub struct SmallDisk {
+    pub free: Arc<AtomicU64>,
+    pub buffer_bytes: Option<usize>,
+}
+
+/// A log in `dir` on a [`SmallDisk`] with `free_bytes` of room (and the
+/// write buffer `buffer_bytes`), retrying every second after a write error;
+/// with the budget, to give the disk room again.
+pub fn log_on_small_disk(
+    dir: &Path,
+    free_bytes: u64,
+    buffer_bytes: Option<usize>,
+) -> (LogHandle, Arc<AtomicU64>) {
+    let free = Arc::new(AtomicU64::new(free_bytes));
+    let mut cfg = config();
+    cfg.retry_after_error_s = 1;
+    let disk = SmallDisk {
+        free: free.clone(),
+        buffer_bytes,
+    };
+    let log = FlightLog::start_with_storage(&cfg, dir, &camera(), Box::new(disk)).unwrap();
+    (log, free)
+}
+
+struct SmallFile {
+    file: File,
+    free: Arc<AtomicU64>,
+}
+
+impl Write for SmallFile {
+    fn write(&mut self, buf: &[u8]) -> io::Result<usize> {
+        let free = self.free.load(Ordering::SeqCst);
+        if free == 0 {
+            return Err(io::Error::new(
+                io::ErrorKind::StorageFull,
+                "no space left on device (test disk)",
+            ));
+        }
+        let n = self.file.write(&buf[..buf.len().min(free as usize)])?;
+        self.free.fetch_sub(n as u64, Ordering::SeqCst);
+        Ok(n)
+    }
+    fn flush(&mut self) -> io::Result<()> {
+        self.file.flush()
+    }
+}
+
+impl Seek for SmallFile {
+    fn seek(&mut self, pos: SeekFrom) -> io::Result<u64> {
+        self.file.seek(pos)
+    }
+}
+
+impl Storage for SmallDisk {
+    fn create(&mut self, path: &Path) -> io::Result<StorageFile> {
+        let file = File::create_new(path)?;
+        let sync = file.try_clone()?;
+        let small = SmallFile {
+            file,
+            free: self.free.clone(),
+        };
+        Ok(StorageFile {
+            writer: match self.buffer_bytes {
+                Some(capacity) => Box::new(BufWriter::with_capacity(capacity, small)),
+                None => Box::new(small),
+            },
+            sync: Box::new(move || sync.sync_data()),
+        })
     }
 }

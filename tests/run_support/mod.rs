@@ -4,10 +4,8 @@
 //! `mcap` crate's stream reader.
 #![allow(dead_code)]
 
-use mavlink::dialects::ardupilotmega::{
-    ATTITUDE_DATA, HEARTBEAT_DATA, LANDING_TARGET_DATA, LOCAL_POSITION_NED_DATA, MavAutopilot,
-    MavMessage, MavModeFlag, MavState, MavType, TIMESYNC_DATA,
-};
+use drogue_vision::testing;
+use mavlink::dialects::ardupilotmega::{LANDING_TARGET_DATA, MavMessage, TIMESYNC_DATA};
 use mavlink::{MavHeader, MavlinkVersion};
 use std::net::{SocketAddr, UdpSocket};
 use std::path::{Path, PathBuf};
@@ -15,16 +13,13 @@ use std::process::{Child, Command, Stdio};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
-use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
+use std::time::{Duration, Instant};
 
 pub const BIN: &str = env!("CARGO_BIN_EXE_drogue-vision");
 
-pub fn unix_now_ns() -> u64 {
-    SystemTime::now()
-        .duration_since(UNIX_EPOCH)
-        .unwrap()
-        .as_nanos() as u64
-}
+// Not every test uses every helper (as `dead_code` above).
+#[allow(unused_imports)]
+pub use drogue_vision::clock::unix_now_ns;
 
 /// The vehicle's pose as the scripted autopilot reports it: LOCAL_POSITION_NED
 /// (metres) and ATTITUDE (roll, pitch, yaw, radians), in the f32 the wire
@@ -150,14 +145,7 @@ fn peer_loop(
         let now = Instant::now();
         if now >= next_heartbeat {
             next_heartbeat += Duration::from_secs(1);
-            out.push(MavMessage::HEARTBEAT(HEARTBEAT_DATA {
-                custom_mode: 0,
-                mavtype: MavType::MAV_TYPE_QUADROTOR,
-                autopilot: MavAutopilot::MAV_AUTOPILOT_ARDUPILOTMEGA,
-                base_mode: MavModeFlag::empty(),
-                system_status: MavState::MAV_STATE_ACTIVE,
-                mavlink_version: 3,
-            }));
+            out.push(testing::autopilot_heartbeat(0));
         }
         if now >= next_telemetry {
             next_telemetry += period;
@@ -165,26 +153,11 @@ fn peer_loop(
             let time_boot_ms = boot.elapsed().as_millis() as u32;
             let stamp_unix_ns = boot_unix_ns + u64::from(time_boot_ms) * 1_000_000;
             if let Some(pose) = script.as_ref().and_then(|s| s(stamp_unix_ns)) {
-                let [x, y, z] = pose.position_ned_m;
-                let [roll, pitch, yaw] = pose.rpy_rad;
-                out.push(MavMessage::ATTITUDE(ATTITUDE_DATA {
+                out.push(testing::attitude(time_boot_ms, pose.rpy_rad));
+                out.push(testing::local_position_ned(
                     time_boot_ms,
-                    roll,
-                    pitch,
-                    yaw,
-                    rollspeed: 0.0,
-                    pitchspeed: 0.0,
-                    yawspeed: 0.0,
-                }));
-                out.push(MavMessage::LOCAL_POSITION_NED(LOCAL_POSITION_NED_DATA {
-                    time_boot_ms,
-                    x,
-                    y,
-                    z,
-                    vx: 0.0,
-                    vy: 0.0,
-                    vz: 0.0,
-                }));
+                    pose.position_ned_m,
+                ));
             }
         }
         if let Some(to) = link {

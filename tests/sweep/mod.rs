@@ -7,11 +7,11 @@
 
 use drogue_sim::camera::SimCamera;
 use drogue_sim::sweep::{DrogueTruth, Level, Sweep};
-use drogue_vision::camera::CameraModel;
 use drogue_vision::config::Config;
 use drogue_vision::frame::{Frame, FrameOrigin};
 use drogue_vision::measure::{Disambiguation, Measurement, Measurer};
-use nalgebra::{Matrix3, Vector3};
+use drogue_vision::testing;
+use nalgebra::Vector3;
 use std::path::PathBuf;
 
 /// The sweep's seed: the same frames on every run.
@@ -105,13 +105,6 @@ fn angle_deg(a: &Vector3<f64>, b: &Vector3<f64>) -> f64 {
     a.cross(b).norm().atan2(a.dot(b)).to_degrees()
 }
 
-/// drogue-vision's model of the simulator's camera.
-fn camera_model(cam: &SimCamera) -> CameraModel {
-    let k = Matrix3::new(cam.fx, 0.0, cam.cx, 0.0, cam.fy, cam.cy, 0.0, 0.0, 1.0);
-    CameraModel::new("sweep", cam.width, cam.height, k, cam.distortion)
-        .expect("the sweep's camera is valid")
-}
-
 /// One measurer per lens.
 #[derive(Default)]
 pub struct Measurers {
@@ -123,8 +116,11 @@ impl Measurers {
         let i = match self.by_lens.iter().position(|(d, _)| *d == cam.distortion) {
             Some(i) => i,
             None => {
-                let m = Measurer::new(camera_model(cam), &Config::embedded().measure())
-                    .expect("measurer");
+                let m = Measurer::new(
+                    testing::camera_from_sim(cam, "sweep"),
+                    &Config::embedded().measure(),
+                )
+                .expect("measurer");
                 self.by_lens.push((cam.distortion, m));
                 self.by_lens.len() - 1
             }
