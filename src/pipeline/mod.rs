@@ -8,7 +8,8 @@
 //!   log: the one place both commands measure.
 //! - [`live`] is `run`'s wiring (threads, bounded queues, pacing, skip
 //!   policy), with [`pacing`], [`closed_loop`] (SITL), [`signals`],
-//!   [`meters`] (the one set of counters), [`status`] (the terminal line)
+//!   [`threads`] (measurement, link events), [`meters`] (the one set of
+//!   counters), [`status`] (the terminal line)
 //!   and [`provenance`] (the log's metadata record) in files of their own.
 //!
 //! `process` runs the same input and stage in one thread, frame by frame
@@ -23,3 +24,4 @@ pub mod provenance;
 pub mod signals;
 pub mod stage;
 pub mod status;
+pub mod threads;
