@@ -66,6 +66,9 @@ pub struct ProcessSummary {
     pub ms_per_frame: f64,
     /// The MCAP log written (`--log`).
     pub log_file: Option<PathBuf>,
+    /// An MCAP input's records above the record bound, skipped unread
+    /// (`crate::log::oversized`): frames they held are not in `frames`.
+    pub oversized_records: u64,
 }
 
 /// Why `process` stopped.
@@ -97,9 +100,19 @@ fn progress_bar(len: u64) -> ProgressBar {
 /// number for a log), or the reason it could not be read.
 type NamedFrames = Box<dyn Iterator<Item = (String, Result<Frame, String>)>>;
 
-/// Opens the input: its frames, camera, count of skipped non-image files and
-/// frame count for the progress bar (0: unknown).
-fn open_input(args: &ProcessArgs) -> Result<(NamedFrames, CameraModel, usize, u64), ProcessError> {
+/// An opened input: its frames, camera, count of skipped non-image files,
+/// frame count for the progress bar (0: unknown), and for an MCAP log the
+/// count of records above the record bound it skipped.
+type OpenedInput = (
+    NamedFrames,
+    CameraModel,
+    usize,
+    u64,
+    Option<Arc<crate::log::oversized::Oversized>>,
+);
+
+/// Opens the input (see [`OpenedInput`]).
+fn open_input(args: &ProcessArgs) -> Result<OpenedInput, ProcessError> {
     let setup = |e: String| ProcessError::Setup(e);
     let given_camera = args
         .camera
@@ -126,7 +139,7 @@ fn open_input(args: &ProcessArgs) -> Result<(NamedFrames, CameraModel, usize, u6
             });
             (name, frame)
         });
-        return Ok((Box::new(frames), camera, skipped, total));
+        return Ok((Box::new(frames), camera, skipped, total, None));
     }
     if args.input.is_file() {
         // An MCAP log: replay its /camera/image with its own camera unless
@@ -137,11 +150,12 @@ fn open_input(args: &ProcessArgs) -> Result<(NamedFrames, CameraModel, usize, u6
             None => ReplayReader::first_camera(&args.input).map_err(|e| setup(e.to_string()))?,
         };
         let reader = replay::open(&args.input).map_err(|e| setup(format!("input {input}: {e}")))?;
+        let oversized = reader.oversized();
         let frames = reader.enumerate().map(|(i, item)| match item {
             Ok(frame) => (frame.seq.to_string(), Ok(frame)),
             Err(e) => (format!("#{i}"), Err(e.to_string())),
         });
-        return Ok((Box::new(frames), camera, 0, 0));
+        return Ok((Box::new(frames), camera, 0, 0, Some(oversized)));
     }
     Err(setup(format!(
         "input {}: neither a folder of images nor an MCAP log",
@@ -187,7 +201,7 @@ pub fn run(args: &ProcessArgs) -> Result<ProcessSummary, ProcessError> {
         }
         config.drogue.inner_radius_m = r;
     }
-    let (frames, camera, skipped, total) = open_input(args)?;
+    let (frames, camera, skipped, total, oversized) = open_input(args)?;
     // The first frame decides before anything is written: a calibration of
     // another size is refused (exit 2, no output files).
     let mut frames = frames.peekable();
@@ -300,6 +314,7 @@ pub fn run(args: &ProcessArgs) -> Result<ProcessSummary, ProcessError> {
         }
         summary.log_file = written.files.first().cloned();
     }
+    summary.oversized_records = oversized.map_or(0, |o| o.records());
     let readable = summary.frames - summary.unreadable;
     if readable > 0 {
         summary.ms_per_frame = measure_time.as_secs_f64() * 1e3 / readable as f64;

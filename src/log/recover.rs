@@ -23,7 +23,7 @@
 //! yields.
 
 use super::LogError;
-use super::oversized::{Oversized, RECORD_LIMIT_BYTES, SkipOversized};
+use super::oversized::{ChunkContent, Oversized, RECORD_LIMIT_BYTES, SkipOversized, walk_chunk};
 use mcap::records::{self, MessageHeader, Record, op};
 use std::collections::{BTreeMap, HashMap};
 use std::fmt;
@@ -67,7 +67,8 @@ pub struct RecoverReport {
     pub unreadable_records: u64,
     /// Messages of channels whose channel record was lost, dropped.
     pub unknown_channel_messages: u64,
-    /// Top-level records above [`RECORD_LIMIT_BYTES`], skipped unread.
+    /// Records above [`RECORD_LIMIT_BYTES`] (top-level, or inside a chunk),
+    /// skipped and not held in memory.
     pub oversized_records: u64,
     /// Log time of the last message copied, ns.
     pub last_log_time_ns: Option<u64>,
@@ -229,6 +230,14 @@ enum Next {
     /// A record above [`RECORD_LIMIT_BYTES`] that fits the file: passed
     /// over unread.
     Oversized,
+    /// A chunk above [`RECORD_LIMIT_BYTES`] that fits the file, its header
+    /// read: the reader is at its compressed records, to be streamed.
+    LargeChunk {
+        offset: u64,
+        header: records::ChunkHeader,
+        /// Where the chunk record ends.
+        end: u64,
+    },
     /// Clean end of the file at a record boundary.
     End,
     /// A record header or body runs past the end of the file.
@@ -266,12 +275,23 @@ impl Input {
         let len = u64::from_le_bytes(head[1..9].try_into().unwrap_or([0; 8]));
         let remaining = self.len.saturating_sub(self.pos);
         if len > RECORD_LIMIT_BYTES as u64 && len <= remaining && opcode != op::CHUNK {
-            // Seeks over it (a chunk this large goes the way of damage:
-            // looked past for the next valid chunk).
+            // Seeks over it.
             self.r
                 .seek_relative(i64::try_from(len).unwrap_or(i64::MAX))?;
             self.pos += len;
             return Ok(Next::Oversized);
+        }
+        if len > RECORD_LIMIT_BYTES as u64 && len <= remaining && opcode == op::CHUNK {
+            // Streamed when its header is sound; otherwise it goes the way
+            // of damage (looked past for the next valid chunk).
+            if let Some(header) = self.large_chunk_header(len)? {
+                return Ok(Next::LargeChunk {
+                    offset,
+                    header,
+                    end: offset + 9 + len,
+                });
+            }
+            self.r.seek(SeekFrom::Start(self.pos))?;
         }
         if len > remaining || len > RECORD_LIMIT_BYTES as u64 {
             return Ok(Next::Short {
@@ -291,6 +311,40 @@ impl Input {
             opcode,
             body,
         })
+    }
+
+    /// The header of a chunk record of `len` bytes whose head was just
+    /// read, when it is sound (its compressed records within the chunk);
+    /// the reader is then at those records. None: not sound, the reader
+    /// anywhere.
+    fn large_chunk_header(&mut self, len: u64) -> std::io::Result<Option<records::ChunkHeader>> {
+        // start, end, uncompressed size, CRC, compression name length.
+        let mut fixed = [0u8; 32];
+        if read_up_to(&mut self.r, &mut fixed)? < fixed.len() {
+            return Ok(None);
+        }
+        let u64_at = |i: usize| u64::from_le_bytes(fixed[i..i + 8].try_into().unwrap_or([0; 8]));
+        let name_len = u32::from_le_bytes(fixed[28..32].try_into().unwrap_or([0; 4])) as usize;
+        if name_len > 16 {
+            return Ok(None);
+        }
+        let mut name = vec![0u8; name_len + 8];
+        if read_up_to(&mut self.r, &mut name)? < name.len() {
+            return Ok(None);
+        }
+        let compressed = u64::from_le_bytes(name[name_len..].try_into().unwrap_or([0; 8]));
+        let header_len = (32 + name_len + 8) as u64;
+        if compressed > len - header_len {
+            return Ok(None);
+        }
+        Ok(Some(records::ChunkHeader {
+            message_start_time: u64_at(0),
+            message_end_time: u64_at(8),
+            uncompressed_size: u64_at(16),
+            uncompressed_crc: u32::from_le_bytes(fixed[24..28].try_into().unwrap_or([0; 4])),
+            compression: String::from_utf8_lossy(&name[..name_len]).into_owned(),
+            compressed_size: compressed,
+        }))
     }
 
     /// Looks for the next chunk whose header parses and whose CRC holds,
@@ -493,6 +547,41 @@ fn inner_records(data: &[u8]) -> (Vec<(u8, &[u8])>, bool) {
     (out, true)
 }
 
+/// The records of a chunk that may hold records above the bound (its
+/// uncompressed size is above it), streamed from its `compressed` records:
+/// each record within the bound is copied, each above it read and dropped in
+/// small pieces and counted. Returns the messages copied and what is wrong
+/// with the chunk (None: size and CRC check out).
+fn stream_chunk<W: Write + Seek>(
+    c: &mut Copier<W>,
+    header: &records::ChunkHeader,
+    compressed: impl Read,
+) -> Result<(u64, Option<String>), String> {
+    let content = match ChunkContent::new(&header.compression, compressed, header.compressed_size) {
+        Ok(Some(content)) => content,
+        Ok(None) => {
+            let name = &header.compression;
+            return Ok((0, Some(format!("unsupported compression {name:?}"))));
+        }
+        Err(e) => return Ok((0, Some(format!("does not decompress: {e}")))),
+    };
+    let mut salvaged = 0;
+    let mut each = |opcode: u8, body: &[u8]| -> Result<(), String> {
+        if c.record(opcode, body)? {
+            salvaged += 1;
+        }
+        Ok(())
+    };
+    let walk = walk_chunk(
+        content,
+        header.uncompressed_size,
+        header.uncompressed_crc,
+        Some(&mut each),
+    )?;
+    c.report.oversized_records += walk.oversized.len() as u64;
+    Ok((salvaged, walk.problem))
+}
+
 /// The copy in progress: channel and schema ids of the input mapped to the
 /// output's.
 struct Copier<W: Write + Seek> {
@@ -678,6 +767,30 @@ pub fn recover(input: &Path, output: &Path) -> Result<RecoverReport, LogError> {
                 c.report.oversized_records += 1;
                 counting = None;
             }
+            Next::LargeChunk {
+                offset,
+                header,
+                end,
+            } => {
+                let (salvaged, problem) =
+                    stream_chunk(&mut c, &header, &mut src.r).map_err(out_err)?;
+                src.r
+                    .seek(SeekFrom::Start(end))
+                    .map_err(|e| LogError::io(input, e))?;
+                src.pos = end;
+                counting = None;
+                if let Some(reason) = problem {
+                    c.report.damaged.push(DamagedChunk {
+                        offset,
+                        start_ns: header.message_start_time,
+                        end_ns: header.message_end_time,
+                        reason,
+                        salvaged,
+                        dropped: None,
+                    });
+                    counting = Some(c.report.damaged.len() - 1);
+                }
+            }
             Next::Short {
                 offset,
                 opcode,
@@ -728,14 +841,21 @@ pub fn recover(input: &Path, output: &Path) -> Result<RecoverReport, LogError> {
                         c.report.unreadable_records += 1;
                         continue;
                     };
-                    let (plain, problem) = decompress(&header, &data);
-                    let (records, _) = inner_records(&plain);
-                    let mut salvaged = 0;
-                    for (o, b) in records {
-                        if c.record(o, b).map_err(out_err)? {
-                            salvaged += 1;
-                        }
-                    }
+                    let (salvaged, problem) =
+                        if header.uncompressed_size > RECORD_LIMIT_BYTES as u64 {
+                            // It may hold records above the bound.
+                            stream_chunk(&mut c, &header, &data[..]).map_err(out_err)?
+                        } else {
+                            let (plain, problem) = decompress(&header, &data);
+                            let (records, _) = inner_records(&plain);
+                            let mut salvaged = 0;
+                            for (o, b) in records {
+                                if c.record(o, b).map_err(out_err)? {
+                                    salvaged += 1;
+                                }
+                            }
+                            (salvaged, problem)
+                        };
                     if let Some(reason) = problem {
                         c.report.damaged.push(DamagedChunk {
                             offset,
