@@ -161,6 +161,10 @@ pub(crate) struct ChunkWalk {
     pub problem: Option<String>,
 }
 
+/// What [`walk_chunk`] hands each record within the bound to: (opcode,
+/// body).
+pub(crate) type RecordFn<'a, E> = &'a mut dyn FnMut(u8, &[u8]) -> Result<(), E>;
+
 /// Walks the records of a chunk's content (decompressed) in `content`,
 /// streaming: a record above [`RECORD_LIMIT_BYTES`] is read and dropped in
 /// small pieces, never held; each other record is handed to `each` (read
@@ -172,7 +176,7 @@ pub(crate) fn walk_chunk<E>(
     content: impl Read,
     size: u64,
     crc: u32,
-    mut each: Option<&mut dyn FnMut(u8, &[u8]) -> Result<(), E>>,
+    mut each: Option<RecordFn<'_, E>>,
 ) -> Result<ChunkWalk, E> {
     let mut r = Hashing {
         inner: content.take(size),
