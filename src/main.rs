@@ -147,6 +147,14 @@ fn main() -> ExitCode {
                     "{} frames, {} detected, {} unreadable, {} other files skipped, {:.2} ms per frame",
                     s.frames, s.detected, s.unreadable, s.skipped, s.ms_per_frame
                 );
+                if s.oversized_records > 0 {
+                    eprintln!(
+                        "{} MCAP records above the {} MiB record bound skipped unread \
+                         (frames they held are missing)",
+                        s.oversized_records,
+                        drogue_vision::log::oversized::RECORD_LIMIT_BYTES >> 20
+                    );
+                }
                 if let Some(log) = &s.log_file {
                     eprintln!("log: {}", log.display());
                 }

@@ -70,6 +70,9 @@ pub struct ProcessSummary {
     pub ms_per_frame: f64,
     /// The MCAP log written (`--log`).
     pub log_file: Option<PathBuf>,
+    /// An MCAP input's records above the record bound, skipped unread
+    /// (`crate::log::oversized`): frames they held are not in `frames`.
+    pub oversized_records: u64,
 }
 
 /// Why `process` stopped.
@@ -322,6 +325,9 @@ pub fn run(args: &ProcessArgs) -> Result<ProcessSummary, ProcessError> {
             });
         }
         summary.log_file = written.files.first().cloned();
+    }
+    if let Input::Mcap(m) = &input {
+        summary.oversized_records = m.oversized_records();
     }
     let readable = summary.frames - summary.unreadable;
     if readable > 0 {

@@ -1,5 +1,5 @@
-//! Top-level MCAP records above the record bound ([`RECORD_LIMIT_BYTES`]),
-//! skipped and counted before the `mcap` crate's reader sees them.
+//! MCAP records above the record bound ([`RECORD_LIMIT_BYTES`]), skipped
+//! and counted before the `mcap` crate's reader sees them.
 //!
 //! The crate's reader refuses a record above its length limit with an error
 //! and reads nothing after it. A log can hold one such record between good
@@ -11,11 +11,22 @@
 //!
 //! Only whole top-level records that fit the file are skipped: a length
 //! running past the end of the file is a cut or damage and goes through, for
-//! the reader to report. Chunks always go through (the reader streams them
-//! record by record, whatever their size); a record above the bound inside
-//! a chunk still ends the reading with the reader's error, as skipping it
-//! would mean decompressing it. The footer's end magic and anything after
-//! it go through unchanged.
+//! the reader to report. The footer's end magic and anything after it go
+//! through unchanged.
+//!
+//! Chunks go through unchanged (the reader streams them record by record)
+//! unless they can hold a record above the bound: a chunk whose records
+//! decompress to more than the bound and that fits the file is first walked
+//! once, streaming ([`walk_chunk`]: decompressed into a small buffer, every
+//! record's bytes hashed and dropped, none held). When that walk finds
+//! records above the bound, checks the chunk's CRC and size, the chunk is
+//! handed to the reader as an uncompressed chunk of its other records,
+//! decompressed a second time as the reader reads it, with a CRC of what it
+//! now holds; the records above the bound are dropped on the way and
+//! counted. A chunk whose walk finds damage (a CRC, a record running past
+//! its end, no decompression) goes through unchanged, for the reader to
+//! report as before. Only chunks that large cost the second pass; a log of
+//! ours never has one.
 //!
 //! Inside an uncompressed chunk it also checks that each record ends within
 //! the chunk's records, and ends the reading with an error where one does
@@ -29,7 +40,8 @@
 //! are still checked).
 
 use mcap::records::op;
-use std::io::{self, Read, Seek, SeekFrom};
+use std::collections::VecDeque;
+use std::io::{self, BufReader, Read, Seek, SeekFrom, Take, Write};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
 
@@ -78,37 +90,249 @@ enum State {
     Magic,
     /// At a record head.
     Head,
-    /// At the header of a chunk record of `body` bytes (its head read).
-    ChunkHeader { body: u64 },
     /// Passing `left` bytes through, then `then`.
     Pass { left: u64, then: After },
+    /// Handing out the records of a chunk that held records above the
+    /// bound, less those ([`Filtered`]).
+    Filtered,
     /// After the footer, a cut or a length the reader is to report: all
     /// the rest as it is.
     Rest,
 }
 
-/// A reader of an MCAP file that leaves out top-level records above
-/// [`RECORD_LIMIT_BYTES`] (see the module docs).
-pub struct SkipOversized<R> {
+/// A chunk's compressed records being decompressed (or, uncompressed,
+/// passed through) from `R`.
+pub(crate) enum ChunkContent<R: Read> {
+    Plain(Take<R>),
+    Zstd(Box<zstd::stream::read::Decoder<'static, BufReader<Take<R>>>>),
+    Lz4(Box<lz4::Decoder<Take<R>>>),
+}
+
+impl<R: Read> ChunkContent<R> {
+    /// The content of a chunk compressed with `compression` (its MCAP
+    /// name) whose `compressed` bytes `r` is at. None: a compression this
+    /// build does not read.
+    pub(crate) fn new(compression: &str, r: R, compressed: u64) -> io::Result<Option<Self>> {
+        let r = r.take(compressed);
+        Ok(Some(match compression {
+            "" => Self::Plain(r),
+            "zstd" => Self::Zstd(Box::new(zstd::stream::read::Decoder::new(r)?)),
+            "lz4" => Self::Lz4(Box::new(lz4::Decoder::new(r)?)),
+            _ => return Ok(None),
+        }))
+    }
+
+    /// The reader back (its position anywhere within the chunk).
+    fn into_inner(self) -> R {
+        match self {
+            Self::Plain(r) => r.into_inner(),
+            Self::Zstd(d) => d.into_inner().into_inner().into_inner(),
+            Self::Lz4(d) => d.finish().0.into_inner(),
+        }
+    }
+}
+
+impl<R: Read> Read for ChunkContent<R> {
+    fn read(&mut self, buf: &mut [u8]) -> io::Result<usize> {
+        match self {
+            Self::Plain(r) => r.read(buf),
+            Self::Zstd(d) => d.read(buf),
+            Self::Lz4(d) => d.read(buf),
+        }
+    }
+}
+
+/// What [`walk_chunk`] found in a chunk's content.
+#[derive(Debug, Default)]
+pub(crate) struct ChunkWalk {
+    /// Records above the bound: (offset of the record head in the content,
+    /// bytes with the head), in order.
+    pub oversized: Vec<(u64, u64)>,
+    /// Their body bytes.
+    pub oversized_bytes: u64,
+    /// Content bytes read.
+    pub len: u64,
+    /// CRC-32 of all the content read, and of the content less the records
+    /// above the bound.
+    pub crc: u32,
+    pub kept_crc: u32,
+    /// Why the walk stopped before the end of the content, or why the
+    /// content is not what the header says (its size, its CRC).
+    pub problem: Option<String>,
+}
+
+/// What [`walk_chunk`] hands each record within the bound to: (opcode,
+/// body).
+pub(crate) type RecordFn<'a, E> = &'a mut dyn FnMut(u8, &[u8]) -> Result<(), E>;
+
+/// Walks the records of a chunk's content (decompressed) in `content`,
+/// streaming: a record above [`RECORD_LIMIT_BYTES`] is read and dropped in
+/// small pieces, never held; each other record is handed to `each` (read
+/// into memory, within the bound) or, without `each`, dropped the same way.
+/// `size` and `crc` are the chunk header's uncompressed size and CRC (0:
+/// none). Stops at the first problem (noted in the result); an error of
+/// `each` ends it with that error.
+pub(crate) fn walk_chunk<E>(
+    content: impl Read,
+    size: u64,
+    crc: u32,
+    mut each: Option<RecordFn<'_, E>>,
+) -> Result<ChunkWalk, E> {
+    let mut r = Hashing {
+        inner: content.take(size),
+        hasher: crc32fast::Hasher::new(),
+        read: 0,
+    };
+    let mut kept = crc32fast::Hasher::new();
+    let mut walk = ChunkWalk::default();
+    let problem = loop {
+        let at = r.read;
+        let mut head = [0u8; 9];
+        match read_up_to(&mut r, &mut head) {
+            Ok(0) => break None,
+            Ok(9) => {}
+            Ok(_) => {
+                break Some(format!(
+                    "a record head is cut off at byte {at} of its records"
+                ));
+            }
+            Err(e) => break Some(format!("does not decompress: {e}")),
+        }
+        let (opcode, len) = (head[0], u64_at(&head, 1));
+        if len > size - r.read {
+            break Some(format!(
+                "the record at byte {at} of its records claims {len} bytes, {} remain",
+                size - r.read
+            ));
+        }
+        if len > RECORD_LIMIT_BYTES as u64 {
+            match io::copy(&mut (&mut r).take(len), &mut io::sink()) {
+                Ok(n) if n == len => {}
+                Ok(_) => break Some(format!("its records end inside the record at byte {at}")),
+                Err(e) => break Some(format!("does not decompress: {e}")),
+            }
+            walk.oversized.push((at, 9 + len));
+            walk.oversized_bytes += len;
+            continue;
+        }
+        kept.update(&head);
+        let got = match each.as_mut() {
+            Some(each) => {
+                let mut body = vec![0u8; len as usize];
+                match r.read_exact(&mut body) {
+                    Ok(()) => {
+                        kept.update(&body);
+                        each(opcode, &body)?;
+                        Ok(len)
+                    }
+                    Err(e) => Err(e),
+                }
+            }
+            None => io::copy(&mut (&mut r).take(len), &mut HashSink { hasher: &mut kept }),
+        };
+        match got {
+            Ok(n) if n == len => {}
+            Ok(_) => break Some(format!("its records end inside the record at byte {at}")),
+            Err(e) if e.kind() == io::ErrorKind::UnexpectedEof => {
+                break Some(format!("its records end inside the record at byte {at}"));
+            }
+            Err(e) => break Some(format!("does not decompress: {e}")),
+        }
+    };
+    walk.len = r.read;
+    walk.crc = r.hasher.finalize();
+    walk.kept_crc = kept.finalize();
+    walk.problem = problem.or_else(|| {
+        if walk.len != size {
+            Some(format!(
+                "decompresses to {} bytes, its header says {size}",
+                walk.len
+            ))
+        } else if crc != 0 && walk.crc != crc {
+            Some(format!("CRC {:08X}, its header says {crc:08X}", walk.crc))
+        } else {
+            None
+        }
+    });
+    Ok(walk)
+}
+
+/// A reader that hashes and counts what it hands out.
+struct Hashing<R> {
     inner: R,
+    hasher: crc32fast::Hasher,
+    read: u64,
+}
+
+impl<R: Read> Read for Hashing<R> {
+    fn read(&mut self, buf: &mut [u8]) -> io::Result<usize> {
+        let n = self.inner.read(buf)?;
+        self.hasher.update(&buf[..n]);
+        self.read += n as u64;
+        Ok(n)
+    }
+}
+
+/// A sink that only hashes.
+struct HashSink<'a> {
+    hasher: &'a mut crc32fast::Hasher,
+}
+
+impl Write for HashSink<'_> {
+    fn write(&mut self, buf: &[u8]) -> io::Result<usize> {
+        self.hasher.update(buf);
+        Ok(buf.len())
+    }
+    fn flush(&mut self) -> io::Result<()> {
+        Ok(())
+    }
+}
+
+/// A chunk handed out less its records above the bound.
+struct Filtered<R: Read> {
+    content: ChunkContent<R>,
+    /// Content bytes read from `content` so far, and in all.
+    at: u64,
+    len: u64,
+    /// The records to drop: (content offset, bytes), in order.
+    drop: VecDeque<(u64, u64)>,
+    /// Where the chunk ends in the file.
+    end: u64,
+}
+
+/// A reader of an MCAP file that leaves out records above
+/// [`RECORD_LIMIT_BYTES`] (see the module docs).
+pub struct SkipOversized<R: Read> {
+    /// The file; None while a [`Filtered`] chunk has it.
+    inner: Option<R>,
+    len: u64,
     /// Bytes of the file after the position of `inner`.
     remaining: u64,
     state: State,
     /// Bytes read ahead (record heads, chunk headers), to hand out first.
     pending: Vec<u8>,
     pending_at: usize,
+    filtered: Option<Filtered<R>>,
     skipped: Arc<Oversized>,
 }
+
+/// Fixed part of a chunk header: start, end, uncompressed size, CRC,
+/// compression name length.
+const CHUNK_FIXED: usize = 8 + 8 + 8 + 4 + 4;
+/// Longest compression name looked at (the known ones are 3 or 4 bytes).
+const MAX_COMPRESSION_NAME: u32 = 16;
 
 impl<R: Read + Seek> SkipOversized<R> {
     /// Wraps `inner`, positioned at the start of a file of `len` bytes.
     pub fn new(inner: R, len: u64) -> Self {
         Self {
-            inner,
+            inner: Some(inner),
+            len,
             remaining: len,
             state: State::Magic,
             pending: Vec::with_capacity(64),
             pending_at: 0,
+            filtered: None,
             skipped: Arc::default(),
         }
     }
@@ -118,11 +342,21 @@ impl<R: Read + Seek> SkipOversized<R> {
         Arc::clone(&self.skipped)
     }
 
+    fn inner(&mut self) -> io::Result<&mut R> {
+        self.inner
+            .as_mut()
+            .ok_or_else(|| io::Error::other("the MCAP file was lost in a chunk's decompression"))
+    }
+
     /// Reads up to `n` bytes onto the end of `pending`; returns how many.
     fn read_ahead(&mut self, n: usize) -> io::Result<usize> {
         let from = self.pending.len();
         self.pending.resize(from + n, 0);
-        let got = read_up_to(&mut self.inner, &mut self.pending[from..])?;
+        let inner = self
+            .inner
+            .as_mut()
+            .ok_or_else(|| io::Error::other("no file"))?;
+        let got = read_up_to(inner, &mut self.pending[from..])?;
         self.pending.truncate(from + got);
         self.remaining = self.remaining.saturating_sub(got as u64);
         Ok(got)
@@ -148,18 +382,19 @@ impl<R: Read + Seek> SkipOversized<R> {
                 let len = u64_at(&self.pending, 1);
                 if len > RECORD_LIMIT_BYTES as u64 && opcode != op::CHUNK && len <= self.remaining {
                     let skip = i64::try_from(len).map_err(io::Error::other)?;
-                    self.inner.seek(SeekFrom::Current(skip))?;
+                    self.inner()?.seek(SeekFrom::Current(skip))?;
                     self.remaining -= len;
                     self.skipped.records.fetch_add(1, Ordering::Relaxed);
                     self.skipped.bytes.fetch_add(len, Ordering::Relaxed);
                     self.pending.clear();
                     continue;
                 }
-                self.state = if opcode == op::CHUNK {
+                if opcode == op::CHUNK {
                     // Also when its length runs past the end: the reader
                     // streams a chunk, and reads its records up to the cut.
-                    State::ChunkHeader { body: len }
-                } else if opcode == op::FOOTER || len > self.remaining {
+                    return self.chunk_header(len);
+                }
+                self.state = if opcode == op::FOOTER || len > self.remaining {
                     // The end magic follows the footer; a length past the
                     // end is the reader's to report.
                     State::Rest
@@ -171,53 +406,186 @@ impl<R: Read + Seek> SkipOversized<R> {
                 };
                 return Ok(());
             },
-            State::ChunkHeader { body } => {
-                // start, end, uncompressed size, CRC, compression name
-                // length; for an uncompressed chunk (empty name) then the
-                // size of its records.
-                const FIXED: u64 = 8 + 8 + 8 + 4 + 4;
-                if body < FIXED + 8 {
-                    self.state = State::Rest;
-                    return Ok(());
-                }
-                if self.read_ahead(FIXED as usize)? < FIXED as usize {
-                    self.state = State::Rest;
-                    return Ok(());
-                }
-                let name_len = u32::from_le_bytes([
-                    self.pending[28],
-                    self.pending[29],
-                    self.pending[30],
-                    self.pending[31],
-                ]);
-                if name_len != 0 {
-                    self.state = State::Pass {
-                        left: body - FIXED,
-                        then: After::Head,
-                    };
-                    return Ok(());
-                }
-                if self.read_ahead(8)? < 8 {
-                    self.state = State::Rest;
-                    return Ok(());
-                }
-                let records = u64_at(&self.pending, FIXED as usize);
-                let data = body - FIXED - 8;
-                self.state = match data.checked_sub(records) {
-                    Some(tail) => State::Pass {
-                        left: 0,
-                        then: After::Inner { records, tail },
-                    },
-                    // The reader refuses a size past the chunk's end.
-                    None => State::Pass {
-                        left: data,
-                        then: After::Head,
-                    },
-                };
-            }
-            State::Pass { .. } | State::Rest => {}
+            State::Pass { .. } | State::Filtered | State::Rest => {}
         }
         Ok(())
+    }
+
+    /// Reads a chunk's header ahead after its head (in `pending`), for a
+    /// chunk record of `body` bytes; decides how its records go through.
+    fn chunk_header(&mut self, body: u64) -> io::Result<()> {
+        const FIXED: u64 = CHUNK_FIXED as u64;
+        let pass_all = |left: u64| State::Pass {
+            left,
+            then: After::Head,
+        };
+        if body < FIXED + 8 || self.read_ahead(CHUNK_FIXED)? < CHUNK_FIXED {
+            self.state = State::Rest;
+            return Ok(());
+        }
+        let size = u64_at(&self.pending, 9 + 16);
+        let name_len = u32_at(&self.pending, 9 + 28);
+        if name_len != 0 {
+            let rest = body - FIXED;
+            if size <= RECORD_LIMIT_BYTES as u64
+                || name_len > MAX_COMPRESSION_NAME
+                || rest > self.remaining
+                || rest < u64::from(name_len) + 8
+            {
+                self.state = pass_all(rest);
+                return Ok(());
+            }
+            // Large enough to hold a record above the bound.
+            let n = name_len as usize + 8;
+            if self.read_ahead(n)? < n {
+                self.state = State::Rest;
+                return Ok(());
+            }
+            let data = rest - n as u64;
+            let compressed = u64_at(&self.pending, 9 + CHUNK_FIXED + name_len as usize);
+            let name =
+                String::from_utf8_lossy(&self.pending[9 + CHUNK_FIXED..][..name_len as usize])
+                    .into_owned();
+            if compressed <= data && self.filter(&name, compressed, data)? {
+                return Ok(());
+            }
+            self.state = pass_all(data);
+            return Ok(());
+        }
+        if self.read_ahead(8)? < 8 {
+            self.state = State::Rest;
+            return Ok(());
+        }
+        let records = u64_at(&self.pending, 9 + CHUNK_FIXED);
+        let data = body - FIXED - 8;
+        let Some(tail) = data.checked_sub(records) else {
+            // The reader refuses a size past the chunk's end.
+            self.state = pass_all(data);
+            return Ok(());
+        };
+        if records > RECORD_LIMIT_BYTES as u64
+            && data <= self.remaining
+            && self.filter("", records, data)?
+        {
+            return Ok(());
+        }
+        self.state = State::Pass {
+            left: 0,
+            then: After::Inner { records, tail },
+        };
+        Ok(())
+    }
+
+    /// At the compressed records (`compressed` bytes of the `data` bytes
+    /// left in the chunk) of a chunk whose head and header are in
+    /// `pending`: walks them once; when they hold records above the bound
+    /// and are otherwise sound, rewrites the head and header in `pending`
+    /// as those of an uncompressed chunk of the other records and starts
+    /// handing those out. Returns whether it did; if not, the file is where
+    /// it was.
+    fn filter(&mut self, compression: &str, compressed: u64, data: u64) -> io::Result<bool> {
+        let start = self.len - self.remaining;
+        let size = u64_at(&self.pending, 9 + 16);
+        let crc = u32_at(&self.pending, 9 + 24);
+        let walk = match ChunkContent::new(compression, self.inner()?, compressed) {
+            Ok(Some(content)) => walk_chunk::<std::convert::Infallible>(content, size, crc, None)
+                .unwrap_or_else(|e| match e {}),
+            // An unknown compression, or no decoder: the reader reports it.
+            Ok(None) | Err(_) => return Ok(false),
+        };
+        self.inner()?.seek(SeekFrom::Start(start))?;
+        if walk.problem.is_some() || walk.oversized.is_empty() {
+            return Ok(false);
+        }
+        let Some(file) = self.inner.take() else {
+            return Ok(false);
+        };
+        let content = match ChunkContent::new(compression, file, compressed) {
+            Ok(Some(c)) => c,
+            _ => {
+                return Err(io::Error::other(
+                    "a chunk's decoder could not be made a second time",
+                ));
+            }
+        };
+        let dropped: u64 = walk.oversized.iter().map(|&(_, n)| n).sum();
+        let kept = size - dropped;
+        // The head and header of an uncompressed chunk of `kept` bytes of
+        // records: its start and end times stay.
+        let times: [u8; 16] = self.pending[9..25].try_into().unwrap_or([0; 16]);
+        self.pending.clear();
+        self.pending_at = 0;
+        self.pending.push(op::CHUNK);
+        self.pending
+            .extend_from_slice(&(CHUNK_FIXED as u64 + 8 + kept).to_le_bytes());
+        self.pending.extend_from_slice(&times);
+        self.pending.extend_from_slice(&kept.to_le_bytes());
+        let kept_crc = if crc == 0 { 0 } else { walk.kept_crc };
+        self.pending.extend_from_slice(&kept_crc.to_le_bytes());
+        self.pending.extend_from_slice(&0u32.to_le_bytes());
+        self.pending.extend_from_slice(&kept.to_le_bytes());
+        self.skipped
+            .records
+            .fetch_add(walk.oversized.len() as u64, Ordering::Relaxed);
+        self.skipped
+            .bytes
+            .fetch_add(walk.oversized_bytes, Ordering::Relaxed);
+        self.filtered = Some(Filtered {
+            content,
+            at: 0,
+            len: size,
+            drop: walk.oversized.into(),
+            end: start + data,
+        });
+        self.state = State::Filtered;
+        Ok(true)
+    }
+
+    /// Hands out the next bytes of a filtered chunk; at its end, takes the
+    /// file back and goes on after the chunk.
+    fn read_filtered(&mut self, buf: &mut [u8]) -> io::Result<Option<usize>> {
+        let Some(f) = self.filtered.as_mut() else {
+            self.state = State::Rest;
+            return Ok(None);
+        };
+        loop {
+            let next_drop = f.drop.front().copied();
+            if let Some((at, n)) = next_drop
+                && at == f.at
+            {
+                let got = io::copy(&mut (&mut f.content).take(n), &mut io::sink())?;
+                if got < n {
+                    return Err(changed());
+                }
+                f.at += n;
+                f.drop.pop_front();
+                continue;
+            }
+            let until = next_drop.map_or(f.len, |(at, _)| at);
+            if f.at == until {
+                break;
+            }
+            let n = usize::try_from(until - f.at)
+                .unwrap_or(usize::MAX)
+                .min(buf.len());
+            let got = f.content.read(&mut buf[..n])?;
+            if got == 0 {
+                return Err(changed());
+            }
+            f.at += got as u64;
+            return Ok(Some(got));
+        }
+        // The chunk's end: the file back, after the chunk.
+        let Some(f) = self.filtered.take() else {
+            return Ok(None);
+        };
+        let mut file = f.content.into_inner();
+        file.seek(SeekFrom::Start(f.end))?;
+        self.remaining = self.len.saturating_sub(f.end);
+        self.inner = Some(file);
+        self.state = State::Head;
+        self.step()?;
+        Ok(None)
     }
 
     /// The next record inside an uncompressed chunk: its head is read ahead
@@ -265,11 +633,26 @@ impl<R: Read + Seek> SkipOversized<R> {
     }
 }
 
+/// A chunk read a second time did not give what it gave the first.
+fn changed() -> io::Error {
+    io::Error::new(
+        io::ErrorKind::InvalidData,
+        "a chunk's records changed between two reads (the file is being written?)",
+    )
+}
+
 /// The little-endian u64 at `at` (the caller has checked the length).
 fn u64_at(b: &[u8], at: usize) -> u64 {
     let mut x = [0u8; 8];
     x.copy_from_slice(&b[at..at + 8]);
     u64::from_le_bytes(x)
+}
+
+/// The little-endian u32 at `at` (the caller has checked the length).
+fn u32_at(b: &[u8], at: usize) -> u32 {
+    let mut x = [0u8; 4];
+    x.copy_from_slice(&b[at..at + 4]);
+    u32::from_le_bytes(x)
 }
 
 impl<R: Read + Seek> Read for SkipOversized<R> {
@@ -294,7 +677,7 @@ impl<R: Read + Seek> Read for SkipOversized<R> {
                 },
                 State::Pass { left, then } => {
                     let n = usize::try_from(left).unwrap_or(usize::MAX).min(buf.len());
-                    let got = self.inner.read(&mut buf[..n])?;
+                    let got = self.inner()?.read(&mut buf[..n])?;
                     self.remaining = self.remaining.saturating_sub(got as u64);
                     self.state = State::Pass {
                         left: left - got as u64,
@@ -302,13 +685,18 @@ impl<R: Read + Seek> Read for SkipOversized<R> {
                     };
                     return Ok(got);
                 }
+                State::Filtered => {
+                    if let Some(n) = self.read_filtered(buf)? {
+                        return Ok(n);
+                    }
+                }
                 State::Rest => {
-                    let got = self.inner.read(buf)?;
+                    let got = self.inner()?.read(buf)?;
                     self.remaining = self.remaining.saturating_sub(got as u64);
                     return Ok(got);
                 }
                 // Each step leaves these states.
-                State::Magic | State::Head | State::ChunkHeader { .. } => self.step()?,
+                State::Magic | State::Head => self.step()?,
             }
         }
     }
@@ -436,6 +824,109 @@ mod tests {
         let got: Vec<_> = mcap::io::MessageReader::new_with_options(source, opts).collect();
         assert_eq!(got.len(), 1);
         assert!(got[0].is_err());
+    }
+
+    /// A chunk of `inner` records (built here byte by byte, per the MCAP
+    /// spec), compressed with `compression` ("" or "zstd"), its CRC that of
+    /// `inner`.
+    fn chunk(inner: &[u8], compression: &str) -> Vec<u8> {
+        let data = match compression {
+            "" => inner.to_vec(),
+            _ => zstd::bulk::compress(inner, 1).unwrap(),
+        };
+        let mut body = Vec::new();
+        body.extend_from_slice(&10u64.to_le_bytes()); // start
+        body.extend_from_slice(&20u64.to_le_bytes()); // end
+        body.extend_from_slice(&(inner.len() as u64).to_le_bytes());
+        body.extend_from_slice(&crc32fast::hash(inner).to_le_bytes());
+        body.extend_from_slice(&(compression.len() as u32).to_le_bytes());
+        body.extend_from_slice(compression.as_bytes());
+        body.extend_from_slice(&(data.len() as u64).to_le_bytes());
+        body.extend_from_slice(&data);
+        record(op::CHUNK, &body)
+    }
+
+    /// A record above the bound inside a chunk (uncompressed or zstd) is
+    /// left out and counted: the reader gets an uncompressed chunk of the
+    /// other records with their CRC, then the rest of the file unchanged.
+    #[test]
+    fn a_record_above_the_bound_inside_a_chunk_is_left_out_and_counted() {
+        let big = record(op::MESSAGE, &vec![3u8; RECORD_LIMIT_BYTES + 1]);
+        let (a, b) = (record(op::SCHEMA, &[1; 10]), record(op::MESSAGE, &[2; 7]));
+        let mut inner = a.clone();
+        inner.extend(&big);
+        inner.extend(&b);
+        inner.extend(&big);
+        let kept = [a, b].concat();
+        for compression in ["", "zstd"] {
+            let mut file = mcap::MAGIC.to_vec();
+            file.extend(chunk(&inner, compression));
+            let tail = record(op::MESSAGE, &[9; 12]);
+            file.extend(&tail);
+            let mut want = mcap::MAGIC.to_vec();
+            want.extend(chunk(&kept, ""));
+            want.extend(&tail);
+            let mut f = SkipOversized::new(Cursor::new(file.clone()), file.len() as u64);
+            let skipped = f.skipped();
+            let mut out = Vec::new();
+            // Small reads, so every boundary is crossed mid-buffer.
+            let mut buf = [0u8; 7];
+            loop {
+                let n = f.read(&mut buf).unwrap();
+                if n == 0 {
+                    break;
+                }
+                out.extend_from_slice(&buf[..n]);
+            }
+            assert!(out == want, "{compression:?}: {} bytes out", out.len());
+            assert_eq!(skipped.records(), 2, "{compression:?}");
+            assert_eq!(skipped.bytes(), 2 * (RECORD_LIMIT_BYTES as u64 + 1));
+            // Through the crate's reader (CRCs checked): the kept records
+            // and the one after the chunk, no error.
+            let len = file.len() as u64;
+            let got = records_read(SkipOversized::new(Cursor::new(file), len));
+            let lens: Vec<(u8, usize)> = got.unwrap();
+            assert_eq!(
+                lens,
+                [(op::SCHEMA, 10), (op::MESSAGE, 7), (op::MESSAGE, 12)],
+                "{compression:?}"
+            );
+        }
+    }
+
+    /// (opcode, length) of every record the `mcap` crate's linear reader
+    /// reads from `source` (into chunks, CRCs checked), or its first error.
+    fn records_read(mut source: impl Read) -> Result<Vec<(u8, usize)>, mcap::McapError> {
+        let opts = super::super::recover::reader_options()
+            .with_skip_end_magic(true)
+            .with_prevalidate_chunk_crcs(false);
+        let mut reader = mcap::sans_io::LinearReader::new_with_options(opts);
+        let mut out = Vec::new();
+        while let Some(event) = reader.next_event() {
+            match event? {
+                mcap::sans_io::LinearReadEvent::ReadRequest(n) => {
+                    let got = source.read(reader.insert(n))?;
+                    reader.notify_read(got);
+                }
+                mcap::sans_io::LinearReadEvent::Record { data, opcode } => {
+                    out.push((opcode, data.len()));
+                }
+            }
+        }
+        Ok(out)
+    }
+
+    /// A chunk that would be rewritten but whose CRC does not hold goes
+    /// through unchanged, for the reader to report (and nothing is counted).
+    #[test]
+    fn a_damaged_chunk_with_a_record_above_the_bound_goes_through() {
+        let big = record(op::MESSAGE, &vec![3u8; RECORD_LIMIT_BYTES + 1]);
+        let mut file = mcap::MAGIC.to_vec();
+        let mut c = chunk(&big, "zstd");
+        // The CRC (after the head, start, end and size).
+        c[9 + 24] ^= 0xFF;
+        file.extend(&c);
+        assert_eq!(filtered(&file), (file.clone(), 0));
     }
 
     #[test]

@@ -23,7 +23,7 @@
 //! yields.
 
 use super::LogError;
-use super::oversized::{Oversized, RECORD_LIMIT_BYTES, SkipOversized};
+use super::oversized::{ChunkContent, Oversized, RECORD_LIMIT_BYTES, SkipOversized, walk_chunk};
 use mcap::records::{self, MessageHeader, Record, op};
 use std::collections::{BTreeMap, HashMap};
 use std::fmt;
@@ -67,7 +67,8 @@ pub struct RecoverReport {
     pub unreadable_records: u64,
     /// Messages of channels whose channel record was lost, dropped.
     pub unknown_channel_messages: u64,
-    /// Top-level records above [`RECORD_LIMIT_BYTES`], skipped unread.
+    /// Records above [`RECORD_LIMIT_BYTES`] (top-level, or inside a chunk),
+    /// skipped and not held in memory.
     pub oversized_records: u64,
     /// Log time of the last message copied, ns.
     pub last_log_time_ns: Option<u64>,
@@ -140,9 +141,99 @@ pub fn reader_options() -> mcap::sans_io::LinearReaderOptions {
         .with_validate_chunk_crcs(true)
 }
 
-/// The message reader of our logs: the `mcap` crate's, over the file with
-/// its top-level records above [`RECORD_LIMIT_BYTES`] left out.
-pub type LogMessageReader = mcap::io::MessageReader<SkipOversized<BufReader<File>>>;
+/// The message reader of our logs: the `mcap` crate's linear reader over
+/// the file with its records above [`RECORD_LIMIT_BYTES`] left out, and the
+/// crate's channel bookkeeping, as the crate's own message reader does, but
+/// parsing only the records it uses (schemas, channels, messages): the
+/// crate's `parse_record` (0.26) panics on an attachment record without
+/// room for its CRC (a slice index past the end; found by the `mcap_reader`
+/// fuzz target), and replay never needs attachments or the other records.
+pub struct LogMessageReader {
+    source: SkipOversized<BufReader<File>>,
+    reader: mcap::sans_io::LinearReader,
+    channels: mcap::read::ChannelAccumulator<'static>,
+    past_data_end: bool,
+    done: bool,
+}
+
+impl LogMessageReader {
+    fn next_inner(&mut self) -> Option<mcap::McapResult<mcap::Message<'static>>> {
+        use mcap::sans_io::LinearReadEvent;
+        loop {
+            let event = match self.reader.next_event()? {
+                Ok(event) => event,
+                Err(e) => return Some(Err(e)),
+            };
+            let (opcode, data) = match event {
+                LinearReadEvent::ReadRequest(n) => {
+                    match self.source.read(self.reader.insert(n)) {
+                        Ok(got) => self.reader.notify_read(got),
+                        Err(e) => return Some(Err(e.into())),
+                    }
+                    continue;
+                }
+                LinearReadEvent::Record { opcode, data } => (opcode, data),
+            };
+            // The summary repeats schemas and channels: read on to the end
+            // magic (checked by the linear reader) without them.
+            if opcode == op::DATA_END {
+                self.past_data_end = true;
+            }
+            if self.past_data_end || !matches!(opcode, op::SCHEMA | op::CHANNEL | op::MESSAGE) {
+                continue;
+            }
+            let record = match mcap::parse_record(opcode, data) {
+                Ok(r) => r,
+                Err(e) => return Some(Err(e)),
+            };
+            match record {
+                Record::Schema { header, data } => {
+                    let data = std::borrow::Cow::Owned(data.into_owned());
+                    if let Err(e) = self.channels.add_schema(header, data) {
+                        return Some(Err(e));
+                    }
+                }
+                Record::Channel(channel) => {
+                    if let Err(e) = self.channels.add_channel(channel) {
+                        return Some(Err(e));
+                    }
+                }
+                Record::Message { header, data } => {
+                    let Some(channel) = self.channels.get(header.channel_id) else {
+                        return Some(Err(mcap::McapError::UnknownChannel(
+                            header.sequence,
+                            header.channel_id,
+                        )));
+                    };
+                    return Some(Ok(mcap::Message {
+                        channel,
+                        sequence: header.sequence,
+                        log_time: header.log_time,
+                        publish_time: header.publish_time,
+                        data: std::borrow::Cow::Owned(data.into_owned()),
+                    }));
+                }
+                _ => {}
+            }
+        }
+    }
+}
+
+impl Iterator for LogMessageReader {
+    type Item = mcap::McapResult<mcap::Message<'static>>;
+
+    /// The next message; after an error or the end, None.
+    fn next(&mut self) -> Option<Self::Item> {
+        if self.done {
+            return None;
+        }
+        let item = self.next_inner();
+        if !matches!(item, Some(Ok(_))) {
+            self.done = true;
+        }
+        item
+    }
+}
 
 /// A streaming message reader for our logs (also cut-short ones): reads
 /// uncompressed, zstd and lz4 chunks and unchunked files, checks chunk CRCs,
@@ -158,7 +249,13 @@ pub fn counted_message_reader(path: &Path) -> Result<(LogMessageReader, Arc<Over
     let source = SkipOversized::new(BufReader::with_capacity(1 << 20, file), len);
     let skipped = source.skipped();
     Ok((
-        mcap::io::MessageReader::new_with_options(source, reader_options()),
+        LogMessageReader {
+            source,
+            reader: mcap::sans_io::LinearReader::new_with_options(reader_options()),
+            channels: Default::default(),
+            past_data_end: false,
+            done: false,
+        },
         skipped,
     ))
 }
@@ -229,6 +326,14 @@ enum Next {
     /// A record above [`RECORD_LIMIT_BYTES`] that fits the file: passed
     /// over unread.
     Oversized,
+    /// A chunk above [`RECORD_LIMIT_BYTES`] that fits the file, its header
+    /// read: the reader is at its compressed records, to be streamed.
+    LargeChunk {
+        offset: u64,
+        header: records::ChunkHeader,
+        /// Where the chunk record ends.
+        end: u64,
+    },
     /// Clean end of the file at a record boundary.
     End,
     /// A record header or body runs past the end of the file.
@@ -266,12 +371,23 @@ impl Input {
         let len = u64::from_le_bytes(head[1..9].try_into().unwrap_or([0; 8]));
         let remaining = self.len.saturating_sub(self.pos);
         if len > RECORD_LIMIT_BYTES as u64 && len <= remaining && opcode != op::CHUNK {
-            // Seeks over it (a chunk this large goes the way of damage:
-            // looked past for the next valid chunk).
+            // Seeks over it.
             self.r
                 .seek_relative(i64::try_from(len).unwrap_or(i64::MAX))?;
             self.pos += len;
             return Ok(Next::Oversized);
+        }
+        if len > RECORD_LIMIT_BYTES as u64 && len <= remaining && opcode == op::CHUNK {
+            // Streamed when its header is sound; otherwise it goes the way
+            // of damage (looked past for the next valid chunk).
+            if let Some(header) = self.large_chunk_header(len)? {
+                return Ok(Next::LargeChunk {
+                    offset,
+                    header,
+                    end: offset + 9 + len,
+                });
+            }
+            self.r.seek(SeekFrom::Start(self.pos))?;
         }
         if len > remaining || len > RECORD_LIMIT_BYTES as u64 {
             return Ok(Next::Short {
@@ -293,12 +409,49 @@ impl Input {
         })
     }
 
+    /// The header of a chunk record of `len` bytes whose head was just
+    /// read, when it is sound (its compressed records within the chunk);
+    /// the reader is then at those records. None: not sound, the reader
+    /// anywhere.
+    fn large_chunk_header(&mut self, len: u64) -> std::io::Result<Option<records::ChunkHeader>> {
+        // start, end, uncompressed size, CRC, compression name length.
+        let mut fixed = [0u8; 32];
+        if read_up_to(&mut self.r, &mut fixed)? < fixed.len() {
+            return Ok(None);
+        }
+        let u64_at = |i: usize| u64::from_le_bytes(fixed[i..i + 8].try_into().unwrap_or([0; 8]));
+        let name_len = u32::from_le_bytes(fixed[28..32].try_into().unwrap_or([0; 4])) as usize;
+        if name_len > 16 {
+            return Ok(None);
+        }
+        let mut name = vec![0u8; name_len + 8];
+        if read_up_to(&mut self.r, &mut name)? < name.len() {
+            return Ok(None);
+        }
+        let compressed = u64::from_le_bytes(name[name_len..].try_into().unwrap_or([0; 8]));
+        let header_len = (32 + name_len + 8) as u64;
+        if compressed > len - header_len {
+            return Ok(None);
+        }
+        Ok(Some(records::ChunkHeader {
+            message_start_time: u64_at(0),
+            message_end_time: u64_at(8),
+            uncompressed_size: u64_at(16),
+            uncompressed_crc: u32::from_le_bytes(fixed[24..28].try_into().unwrap_or([0; 4])),
+            compression: String::from_utf8_lossy(&name[..name_len]).into_owned(),
+            compressed_size: compressed,
+        }))
+    }
+
     /// Looks for the next chunk whose header parses and whose CRC holds,
     /// after `from`; leaves the reader at it. Returns its offset.
     fn resync(&mut self, from: u64) -> std::io::Result<Option<u64>> {
         const WINDOW: usize = 1 << 20;
         let mut base = from;
-        let mut buf = vec![0u8; WINDOW];
+        // No larger than what is left to look at (zeroing a whole window
+        // for a small file was a tenth of the time of recovering it).
+        let left = usize::try_from(self.len.saturating_sub(from)).unwrap_or(usize::MAX);
+        let mut buf = vec![0u8; WINDOW.min(left)];
         while base < self.len {
             self.r.seek(SeekFrom::Start(base))?;
             let n = read_up_to(&mut self.r, &mut buf)?;
@@ -308,10 +461,10 @@ impl Input {
             // Candidates whose 9-byte head lies in this window; the last 8
             // bytes are looked at again at the start of the next one.
             let mut found = None;
-            for i in 0..n - 8 {
-                if buf[i] != op::CHUNK {
-                    continue;
-                }
+            let mut from = 0;
+            while let Some(k) = find_byte(&buf[from..n - 8], op::CHUNK) {
+                let i = from + k;
+                from = i + 1;
                 let at = base + i as u64;
                 let len = u64::from_le_bytes(buf[i + 1..i + 9].try_into().unwrap_or([0; 8]));
                 if plausible_chunk_len(len, at, self.len) && self.chunk_at(at)? {
@@ -393,6 +546,38 @@ impl Input {
             _ => Ok(false),
         }
     }
+}
+
+/// Whether an attachment record's body has room for its CRC after its
+/// header and data length (or is too short for those, which `parse_record`
+/// reports as an error): the `mcap` crate's `parse_record` (0.26) slices
+/// such a body at its length less 4 without a check, a panic when less
+/// than 4 bytes follow (found by the `mcap_reader` fuzz target).
+fn attachment_has_its_crc(body: &[u8]) -> bool {
+    // log time, create time, name, media type, data length.
+    let string_end = |at: usize| -> Option<usize> {
+        let n = u32::from_le_bytes(body.get(at..at + 4)?.try_into().ok()?) as usize;
+        (at + 4).checked_add(n)
+    };
+    let Some(after_name) = string_end(16) else {
+        return true;
+    };
+    let Some(header_end) = string_end(after_name).and_then(|e| e.checked_add(8)) else {
+        return true;
+    };
+    // A header running past the body is the parser's error to report.
+    header_end > body.len() || body.len() - header_end >= 4
+}
+
+/// Where the first `byte` is in `hay`: std's `memchr` (a word at a time), by
+/// way of `BufRead::skip_until`, where a loop over the bytes makes a compare
+/// per byte (most of the time of recovering a damaged file went there).
+fn find_byte(hay: &[u8], byte: u8) -> Option<usize> {
+    use std::io::BufRead;
+    let mut rest = hay;
+    let n = rest.skip_until(byte).ok()?;
+    // Through the byte when found; otherwise to the end, where no byte is it.
+    (n > 0 && hay[n - 1] == byte).then(|| n - 1)
 }
 
 /// Whether a chunk of `len` bytes at `at` fits the file (a chunk header is
@@ -493,6 +678,41 @@ fn inner_records(data: &[u8]) -> (Vec<(u8, &[u8])>, bool) {
     (out, true)
 }
 
+/// The records of a chunk that may hold records above the bound (its
+/// uncompressed size is above it), streamed from its `compressed` records:
+/// each record within the bound is copied, each above it read and dropped in
+/// small pieces and counted. Returns the messages copied and what is wrong
+/// with the chunk (None: size and CRC check out).
+fn stream_chunk<W: Write + Seek>(
+    c: &mut Copier<W>,
+    header: &records::ChunkHeader,
+    compressed: impl Read,
+) -> Result<(u64, Option<String>), String> {
+    let content = match ChunkContent::new(&header.compression, compressed, header.compressed_size) {
+        Ok(Some(content)) => content,
+        Ok(None) => {
+            let name = &header.compression;
+            return Ok((0, Some(format!("unsupported compression {name:?}"))));
+        }
+        Err(e) => return Ok((0, Some(format!("does not decompress: {e}")))),
+    };
+    let mut salvaged = 0;
+    let mut each = |opcode: u8, body: &[u8]| -> Result<(), String> {
+        if c.record(opcode, body)? {
+            salvaged += 1;
+        }
+        Ok(())
+    };
+    let walk = walk_chunk(
+        content,
+        header.uncompressed_size,
+        header.uncompressed_crc,
+        Some(&mut each),
+    )?;
+    c.report.oversized_records += walk.oversized.len() as u64;
+    Ok((salvaged, walk.problem))
+}
+
 /// The copy in progress: channel and schema ids of the input mapped to the
 /// output's.
 struct Copier<W: Write + Seek> {
@@ -508,6 +728,10 @@ impl<W: Write + Seek> Copier<W> {
     /// Handles one record (top level or inside a chunk); returns whether it
     /// was a message written.
     fn record(&mut self, opcode: u8, body: &[u8]) -> Result<bool, String> {
+        if opcode == op::ATTACHMENT && !attachment_has_its_crc(body) {
+            self.report.unreadable_records += 1;
+            return Ok(false);
+        }
         let record = match mcap::parse_record(opcode, body) {
             Ok(r) => r,
             Err(_) => {
@@ -604,6 +828,22 @@ impl<W: Write + Seek> Copier<W> {
     }
 }
 
+/// The output's write options, made once: `WriteOptions::new` counts the
+/// machine's physical cores by reading `/proc/cpuinfo` (for a default this
+/// overrides), which was a tenth of the time of recovering a small file.
+static OUTPUT_OPTIONS: std::sync::LazyLock<mcap::WriteOptions> = std::sync::LazyLock::new(|| {
+    mcap::WriteOptions::new()
+        .compression(Some(mcap::Compression::Zstd))
+        .compression_level(1)
+        .compression_threads(0)
+        .profile("")
+        .library(concat!(
+            "drogue-vision ",
+            env!("CARGO_PKG_VERSION"),
+            " recover"
+        ))
+});
+
 /// Copies every message `input` still holds into a new complete file
 /// `output` (zstd chunks). Fails when `input` is missing or not an MCAP file
 /// ([`LogError::Format`]), when `output` is the input or cannot be written
@@ -646,16 +886,7 @@ pub fn recover(input: &Path, output: &Path) -> Result<RecoverReport, LogError> {
         .as_file()
         .try_clone()
         .map_err(|e| LogError::io(output, e))?;
-    let options = mcap::WriteOptions::new()
-        .compression(Some(mcap::Compression::Zstd))
-        .compression_level(1)
-        .compression_threads(0)
-        .profile("")
-        .library(concat!(
-            "drogue-vision ",
-            env!("CARGO_PKG_VERSION"),
-            " recover"
-        ));
+    let options = OUTPUT_OPTIONS.clone();
     let out = mcap::Writer::with_options(BufWriter::with_capacity(1 << 20, handle), options)
         .map_err(|e| LogError::io(output, super::error_chain(&e)))?;
     let mut c = Copier {
@@ -677,6 +908,30 @@ pub fn recover(input: &Path, output: &Path) -> Result<RecoverReport, LogError> {
             Next::Oversized => {
                 c.report.oversized_records += 1;
                 counting = None;
+            }
+            Next::LargeChunk {
+                offset,
+                header,
+                end,
+            } => {
+                let (salvaged, problem) =
+                    stream_chunk(&mut c, &header, &mut src.r).map_err(out_err)?;
+                src.r
+                    .seek(SeekFrom::Start(end))
+                    .map_err(|e| LogError::io(input, e))?;
+                src.pos = end;
+                counting = None;
+                if let Some(reason) = problem {
+                    c.report.damaged.push(DamagedChunk {
+                        offset,
+                        start_ns: header.message_start_time,
+                        end_ns: header.message_end_time,
+                        reason,
+                        salvaged,
+                        dropped: None,
+                    });
+                    counting = Some(c.report.damaged.len() - 1);
+                }
             }
             Next::Short {
                 offset,
@@ -728,14 +983,21 @@ pub fn recover(input: &Path, output: &Path) -> Result<RecoverReport, LogError> {
                         c.report.unreadable_records += 1;
                         continue;
                     };
-                    let (plain, problem) = decompress(&header, &data);
-                    let (records, _) = inner_records(&plain);
-                    let mut salvaged = 0;
-                    for (o, b) in records {
-                        if c.record(o, b).map_err(out_err)? {
-                            salvaged += 1;
-                        }
-                    }
+                    let (salvaged, problem) =
+                        if header.uncompressed_size > RECORD_LIMIT_BYTES as u64 {
+                            // It may hold records above the bound.
+                            stream_chunk(&mut c, &header, &data[..]).map_err(out_err)?
+                        } else {
+                            let (plain, problem) = decompress(&header, &data);
+                            let (records, _) = inner_records(&plain);
+                            let mut salvaged = 0;
+                            for (o, b) in records {
+                                if c.record(o, b).map_err(out_err)? {
+                                    salvaged += 1;
+                                }
+                            }
+                            (salvaged, problem)
+                        };
                     if let Some(reason) = problem {
                         c.report.damaged.push(DamagedChunk {
                             offset,
@@ -907,4 +1169,22 @@ fn recover_in_place(path: &Path, keep_cut: bool) -> Result<RecoverReport, LogErr
     }
     std::fs::rename(&tmp, path).map_err(|e| LogError::io(&tmp, e))?;
     Ok(report)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::find_byte;
+
+    #[test]
+    fn find_byte_finds_the_first_one_or_none() {
+        assert_eq!(find_byte(b"", 6), None);
+        assert_eq!(find_byte(&[1, 2, 3], 6), None);
+        assert_eq!(find_byte(&[6], 6), Some(0));
+        assert_eq!(find_byte(&[1, 6, 6], 6), Some(1));
+        assert_eq!(find_byte(&[1, 2, 6], 6), Some(2));
+        let mut long = vec![0u8; 1000];
+        long[777] = 6;
+        long[999] = 6;
+        assert_eq!(find_byte(&long, 6), Some(777));
+    }
 }

@@ -1,10 +1,11 @@
 //! Replay: `/camera/image` back as [`Frame`]s, streaming (one record in
 //! memory at a time), with the camera from `/camera/calibration`.
 //!
-//! A top-level record above the record bound is skipped unread and the
-//! reading goes on ([`super::oversized`]); each skip is logged as a warning
-//! when it happens, the total when the log ends, and
-//! [`ReplayReader::oversized_skipped`] counts them.
+//! A record above the record bound (top-level, or inside a chunk) is
+//! skipped without being held in memory and the reading goes on
+//! ([`super::oversized`]); each skip is logged as a warning when it
+//! happens, the total when the log ends, and [`ReplayReader::oversized`]
+//! counts them for the summaries (`process`).
 
 use super::oversized::Oversized;
 use super::oversized::RECORD_LIMIT_BYTES;
@@ -45,9 +46,15 @@ pub fn open(path: &Path) -> Result<ReplayReader, LogError> {
 }
 
 impl ReplayReader {
-    /// Top-level records above [`RECORD_LIMIT_BYTES`] skipped so far.
+    /// Records above [`RECORD_LIMIT_BYTES`] skipped so far.
     pub fn oversized_skipped(&self) -> u64 {
         self.oversized.records()
+    }
+
+    /// The live count of the records above the bound skipped, to read
+    /// after the frames were consumed (the reader itself may be gone).
+    pub fn oversized(&self) -> Arc<Oversized> {
+        Arc::clone(&self.oversized)
     }
 
     /// Warns of the records skipped since the last warning.

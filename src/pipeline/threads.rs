@@ -103,4 +103,3 @@ pub fn spawn_event_logger(
         latency_ms
     })
 }
-

@@ -30,6 +30,14 @@ impl McapSource {
     }
 }
 
+impl McapSource {
+    /// Records above the record bound skipped unread so far (frames they
+    /// held are missing).
+    pub fn oversized_records(&self) -> u64 {
+        self.reader.oversized().records()
+    }
+}
+
 impl FrameSource for McapSource {
     fn camera(&self) -> Option<CameraModel> {
         self.camera.as_ref().ok().cloned()

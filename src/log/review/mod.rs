@@ -5,7 +5,8 @@
 mod plots;
 mod stats;
 
-use super::recover::{is_cut_short, message_reader};
+use super::oversized::RECORD_LIMIT_BYTES;
+use super::recover::{counted_message_reader, is_cut_short};
 use super::{LogError, topics};
 use foxglove::Decode;
 use foxglove::messages::Log;
@@ -133,6 +134,11 @@ pub struct ReviewReport {
     pub cut: Option<String>,
     /// Why reading stopped at damage (a chunk CRC, a bad record), if it did.
     pub damaged: Option<String>,
+    /// MCAP records above the record bound, skipped without being read
+    /// (their frames or messages are missing from everything below), and
+    /// their bytes.
+    pub oversized_records: u64,
+    pub oversized_bytes: u64,
     /// The log's MCAP metadata records (name, key/values), in file order.
     pub metadata: Vec<(String, BTreeMap<String, String>)>,
     /// Log time span of all messages, ns.
@@ -299,7 +305,8 @@ fn review_into(log: &Path, out_dir: &Path) -> Result<ReviewReport, LogError> {
     let mut first_frame_ns: Option<u64> = None;
     let mut first_stats: Option<(u64, CpuTotalLite)> = None;
 
-    for message in message_reader(log)? {
+    let (messages, oversized) = counted_message_reader(log)?;
+    for message in messages {
         let m = match message {
             Ok(m) => m,
             Err(e) => {
@@ -498,6 +505,8 @@ fn review_into(log: &Path, out_dir: &Path) -> Result<ReviewReport, LogError> {
             _ => {}
         }
     }
+    r.oversized_records = oversized.records();
+    r.oversized_bytes = oversized.bytes();
     csv.flush().map_err(csv_err)?;
     r.files_written.push(csv_path);
     if !r.metadata.is_empty() {
@@ -593,6 +602,16 @@ impl fmt::Display for ReviewReport {
                 f,
                 "           DAMAGED, read up to: {d} (drogue-vision recover salvages the rest \
                  and says what is lost)"
+            )?;
+        }
+        if self.oversized_records > 0 {
+            writeln!(
+                f,
+                "           SKIPPED: {} MCAP record(s) ({} bytes) above the {} MiB record \
+                 bound, not read (what they held is missing below)",
+                self.oversized_records,
+                self.oversized_bytes,
+                RECORD_LIMIT_BYTES >> 20
             )?;
         }
         for (name, values) in &self.metadata {

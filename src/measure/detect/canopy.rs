@@ -160,7 +160,7 @@ fn pose_ring(
             STEP_PX,
             profile,
         );
-        let expected = ((2.0 * (search + half)) / STEP_PX).floor() as usize + 1;
+        let expected = (((2.0 * (search + half)) / STEP_PX).floor() as usize).saturating_add(1);
         if profile.len() < expected || profile.iter().any(|&v| v >= SATURATED_GRAY) {
             continue;
         }

@@ -64,7 +64,10 @@ pub fn profile(
     out: &mut Vec<f32>,
 ) {
     out.clear();
-    let n = ((s_max - s_min) / step).floor().max(0.0) as usize + 1;
+    // Saturating: a range too long for a usize (a rim projected from a pose
+    // far off, found by the image_measure fuzz target) is the samples up to
+    // the border, never an overflow.
+    let n = (((s_max - s_min) / step).floor().max(0.0) as usize).saturating_add(1);
     let at = |k: usize| {
         let s = s_min + k as f64 * step;
         (origin[0] + s * dir[0], origin[1] + s * dir[1])
@@ -363,6 +366,19 @@ pub fn strongest_rise(p: &[f32], s_min: f64, step: f64, min_contrast: f32) -> Op
 
 #[cfg(test)]
 mod tests {
+    /// A range too long to count in a usize (the `image_measure` fuzz
+    /// target's crash: an overflow panic where overflow is checked, and an
+    /// empty profile where it wraps) gives the samples up to the border.
+    #[test]
+    fn a_range_too_long_to_count_is_sampled_up_to_the_border() {
+        let img = GrayImage::from_fn(64, 48, |x, _| image::Luma([x as u8]));
+        let mut out = Vec::new();
+        profile(&img, [10.0, 20.0], [1.0, 0.0], 0.0, 1e300, 0.5, &mut out);
+        // From u = 10 to the last column, u = 63, in half pixels.
+        assert_eq!(out.len(), 2 * 53 + 1);
+        assert_eq!((out[0], out[out.len() - 1]), (10.0, 63.0));
+    }
+
     use super::*;
 
     #[test]
