@@ -92,16 +92,7 @@ fn main() {
     let wanted = |name: &str| only.as_deref().is_none_or(|o| name.contains(o));
     println!("{}", SetNees::header());
     if let Some(dir) = &reference {
-        for name in [
-            "paper10",
-            "range",
-            "tilt",
-            "occlusion",
-            "noise",
-            "hard",
-            "hard_b",
-            "hard_c",
-        ] {
+        for name in drogue_vision::testing::DROGUE_REFERENCE_SETS {
             if wanted(name) {
                 print(
                     &nees::reference_set_scored(dir, name, against_truth),

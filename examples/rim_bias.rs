@@ -119,16 +119,7 @@ fn main() {
     }
     let config = Config::embedded();
     if let Some(dir) = reference {
-        for set in [
-            "paper10",
-            "range",
-            "tilt",
-            "occlusion",
-            "noise",
-            "hard",
-            "hard_b",
-            "hard_c",
-        ] {
+        for set in drogue_vision::testing::DROGUE_REFERENCE_SETS {
             let d = dir.join(set);
             let camera = CameraModel::load(&d.join("camera.yaml")).unwrap();
             for line in std::fs::read_to_string(d.join("truth.jsonl"))

@@ -38,6 +38,19 @@ use std::path::{Path, PathBuf};
 /// independent renderer's sets, `../shared/data/reference` beside CI's clone).
 pub const REFERENCE_DIR_VAR: &str = "DROGUE_REFERENCE_DIR";
 
+/// The reference sets whose frames hold a drogue (every set but `negative`
+/// and `badinput`), in the order the reports list them.
+pub const DROGUE_REFERENCE_SETS: [&str; 8] = [
+    "paper10",
+    "range",
+    "tilt",
+    "occlusion",
+    "noise",
+    "hard",
+    "hard_b",
+    "hard_c",
+];
+
 /// The reference frames' folder from `DROGUE_REFERENCE_DIR`.
 ///
 /// The tests that call it are `#[ignore]`d; run on purpose (`.ci/run` runs

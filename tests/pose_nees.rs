@@ -116,16 +116,7 @@ fn position_nees_on_reference_sets_is_near_three_dof() {
     );
     let scale = Config::embedded().link.target_relative_std_scale;
     let mut failures = Vec::new();
-    for name in [
-        "paper10",
-        "range",
-        "tilt",
-        "occlusion",
-        "noise",
-        "hard",
-        "hard_b",
-        "hard_c",
-    ] {
+    for name in drogue_vision::testing::DROGUE_REFERENCE_SETS {
         let set = nees::reference_set(&dir, name);
         let own_median = set.median();
         eprintln!("{}", set.row());

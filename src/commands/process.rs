@@ -293,8 +293,10 @@ pub fn run(args: &ProcessArgs) -> Result<ProcessSummary, ProcessError> {
                 }
                 clock.start_at(frame.capture_time_ns);
                 clock.advance_to(frame.capture_time_ns);
+                // Shared with the log, not copied (a frame is megabytes).
+                let frame = Arc::new(frame);
                 if let Some(log) = &log {
-                    log.frame_with_truth(Arc::new(frame.clone()), truth);
+                    log.frame_with_truth(Arc::clone(&frame), truth);
                 }
                 let t = Instant::now();
                 let measured = stage.measure(&frame, name);

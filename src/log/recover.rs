@@ -50,6 +50,26 @@ pub struct DamagedChunk {
     pub dropped: Option<u64>,
 }
 
+impl DamagedChunk {
+    /// A chunk whose header was read: its offset and claimed times, and what
+    /// was salvaged from it (`dropped` is filled in later from the index).
+    fn from_header(
+        offset: u64,
+        header: &records::ChunkHeader,
+        reason: String,
+        salvaged: u64,
+    ) -> Self {
+        Self {
+            offset,
+            start_ns: header.message_start_time,
+            end_ns: header.message_end_time,
+            reason,
+            salvaged,
+            dropped: None,
+        }
+    }
+}
+
 /// What a recovery copied and what it found.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct RecoverReport {
@@ -922,14 +942,9 @@ pub fn recover(input: &Path, output: &Path) -> Result<RecoverReport, LogError> {
                 src.pos = end;
                 counting = None;
                 if let Some(reason) = problem {
-                    c.report.damaged.push(DamagedChunk {
-                        offset,
-                        start_ns: header.message_start_time,
-                        end_ns: header.message_end_time,
-                        reason,
-                        salvaged,
-                        dropped: None,
-                    });
+                    c.report
+                        .damaged
+                        .push(DamagedChunk::from_header(offset, &header, reason, salvaged));
                     counting = Some(c.report.damaged.len() - 1);
                 }
             }
@@ -999,14 +1014,9 @@ pub fn recover(input: &Path, output: &Path) -> Result<RecoverReport, LogError> {
                             (salvaged, problem)
                         };
                     if let Some(reason) = problem {
-                        c.report.damaged.push(DamagedChunk {
-                            offset,
-                            start_ns: header.message_start_time,
-                            end_ns: header.message_end_time,
-                            reason,
-                            salvaged,
-                            dropped: None,
-                        });
+                        c.report
+                            .damaged
+                            .push(DamagedChunk::from_header(offset, &header, reason, salvaged));
                         counting = Some(c.report.damaged.len() - 1);
                     }
                 }
