@@ -239,6 +239,9 @@ struct RimPass {
     fill: f64,
     /// Distance from the ellipse counted as on the rim, pixels.
     tolerance: f64,
+    /// The rim's mid level by direction (angle about the ellipse's centre,
+    /// gray level), for the canopy test.
+    mids: Vec<(f64, f32)>,
 }
 
 /// A verified candidate.
@@ -942,6 +945,7 @@ impl Detector {
             shape,
             fill,
             tolerance: tol,
+            mids,
         })
     }
 
@@ -1006,6 +1010,7 @@ impl Detector {
             shape,
             fill,
             tolerance: tol,
+            mids,
         } = pass;
         // Canopy evidence: its outer rim where the candidate's pose puts it.
         let widths: Vec<(f64, f64)> = inliers
@@ -1033,6 +1038,7 @@ impl Detector {
         let edge = canopy::RimEdge {
             min_step_gray: (0.1 * rim_contrast).max(0.5 * self.cfg.min_contrast_gray) as f32,
             widths: &widths,
+            mids: &mids,
         };
         let canopy = canopy::ring_support(
             image,
