@@ -318,6 +318,18 @@ pub struct Detector {
     smoothing_spread_px: Vec<f64>,
 }
 
+/// Whether the light side of step `e` (from its crossing to a few samples
+/// past its light end) on profile `p` (sampled from `s_min` every `step`)
+/// reaches saturation.
+fn glare_on_light_side(p: &[f32], s_min: f64, step: f64, e: &rim::RayEdge) -> bool {
+    let Some(last) = p.len().checked_sub(1) else {
+        return false;
+    };
+    let index = |s: f64| (((s - s_min) / step).max(0.0) as usize).min(last);
+    let (from, to) = (index(e.s), (index(e.light_s) + 2).min(last));
+    p[from..=to].iter().any(|&v| v >= SATURATED_GRAY)
+}
+
 /// Radius of an ellipse (centred at the origin) in direction `phi`.
 fn polar_radius(a: f64, b: f64, theta: f64, phi: f64) -> f64 {
     let (s, c) = (phi - theta).sin_cos();
@@ -844,6 +856,16 @@ impl Detector {
                     rim::smooth(&mut self.profile, half, &mut self.scratch);
                 }
                 if let Some(mut e) = rim::strongest_rise(&self.profile, s0, 0.5, min_contrast) {
+                    // A step into saturated pixels is most likely the skirt
+                    // of a glare streak lying over the disc: its width says
+                    // nothing of blur. (Its point stays: the robust fit
+                    // drops it when it is off the rim.)
+                    let raw = if half > 0 {
+                        &self.raw_profile
+                    } else {
+                        &self.profile
+                    };
+                    let glare = glare_on_light_side(raw, s0, 0.5, &e);
                     if half > 0 {
                         let mid = 0.5 * (e.dark + e.light);
                         let reach = 0.5 * self.smoothing_spread_px[half] + 1.0;
@@ -861,7 +883,7 @@ impl Detector {
                     // The smoothing's own spread is not the step's.
                     let spread = self.smoothing_spread_px[half];
                     widths.push((2.0 * (e.light_s - e.s) - spread).max(0.0));
-                    clipped += usize::from(e.clipped);
+                    clipped += usize::from(e.clipped && !glare);
                 }
             }
             tracing::trace!(
