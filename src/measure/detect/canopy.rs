@@ -108,10 +108,7 @@ impl RimEdge<'_> {
 
 /// The entry of `by_angle` nearest in angle to `angle`.
 fn nearest<T>(by_angle: &[(f64, T)], angle: f64) -> Option<&(f64, T)> {
-    let gap = |a: f64| {
-        let d = (a - angle).rem_euclid(std::f64::consts::TAU);
-        d.min(std::f64::consts::TAU - d)
-    };
+    let gap = |a: f64| super::angle_gap(a, angle);
     by_angle.iter().min_by(|x, y| gap(x.0).total_cmp(&gap(y.0)))
 }
 

@@ -519,3 +519,17 @@ fn a_step_into_saturation_is_glare() {
     let e = super::rim::strongest_rise(&canopy, 0.0, 0.5, 12.0).expect("a step");
     assert!(!super::glare_on_light_side(&canopy, 0.0, 0.5, &e));
 }
+
+/// The angle between two directions, as `rem_euclid` gives it.
+#[test]
+fn angle_gap_matches_rem_euclid() {
+    use std::f64::consts::TAU;
+    let mut rng = ChaCha8Rng::seed_from_u64(5);
+    for _ in 0..10_000 {
+        let a: f64 = rng.random_range(-4.0..7.0);
+        let b: f64 = rng.random_range(-4.0..7.0);
+        let d = (a - b).rem_euclid(TAU);
+        let expected = d.min(TAU - d);
+        assert!((super::angle_gap(a, b) - expected).abs() < 1e-12, "{a} {b}");
+    }
+}
