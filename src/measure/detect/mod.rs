@@ -169,6 +169,11 @@ const INNER_SEED_STREAM: u64 = 0x1_0000;
 /// Circles of the edge source verified per frame, strongest first.
 const EDGE_SEEDS: usize = 4;
 
+/// Share of the inside that must be dark when the canopy cannot be judged
+/// (`min_fill` applies otherwise): a disc is dark all over, up to a glare
+/// skirt or a highlight on the probe over a fifth of it.
+const UNJUDGED_MIN_FILL: f64 = 0.8;
+
 /// Rays and radius fractions of the fill test (inside the ellipse).
 const FILL_DIRECTIONS: usize = 24;
 const FILL_FRACTIONS: [f64; 5] = [0.1, 0.3, 0.5, 0.7, 0.85];
@@ -1084,6 +1089,12 @@ impl Detector {
             && seen < self.cfg.min_canopy_fraction
         {
             return Err(Reject::NoCanopy(seen));
+        }
+        // Without the canopy's say (its rim off the frame, too thin or
+        // smeared to judge) the inside must be the disc's: dark nearly
+        // everywhere, not the half of a ring's inside or a cloud's.
+        if canopy.is_none() && fill < UNJUDGED_MIN_FILL {
+            return Err(Reject::LightInside(fill));
         }
         tracing::debug!(
             centre_px = ?[ellipse.cx.round(), ellipse.cy.round()],

@@ -533,3 +533,19 @@ fn angle_gap_matches_rem_euclid() {
         assert!((super::angle_gap(a, b) - expected).abs() < 1e-12, "{a} {b}");
     }
 }
+
+/// A large dark ring (light inside) whose canopy would lie far off the
+/// frame: with no canopy to judge, the fill must be a disc's, and half a
+/// ring's inside is not.
+#[test]
+fn a_ring_whose_canopy_would_be_off_the_frame_is_not_a_drogue() {
+    // Dark from 0.45 to 1 of its radius: three of the fill test's five
+    // radius fractions (0.5, 0.7, 0.85) are dark, a fill of 0.6.
+    let (w, h) = (1280, 960);
+    let cam = camera(w, h);
+    let img = GrayImage::from_fn(w, h, |x, y| {
+        let r = (f64::from(x) - 640.0).hypot(f64::from(y) - 480.0);
+        Luma([if (150.0..330.0).contains(&r) { 40 } else { 180 }])
+    });
+    assert!(detector(&cam).detect(&img, None).is_none());
+}
