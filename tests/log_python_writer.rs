@@ -6,7 +6,7 @@
 //! detections of the PNG folder, review reads it whole (not cut short, not
 //! damaged), and recover copies every message.
 
-use drogue_vision::log::recover;
+use drogue_vision::log::{reader, recover};
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
@@ -91,7 +91,7 @@ fn a_python_written_zstd_log_is_replayed_processed_reviewed_and_recovered() {
         (n, None, 0),
         "{rep}"
     );
-    let copied = recover::message_reader(&out)
+    let copied = reader::message_reader(&out)
         .unwrap()
         .filter(|m| m.is_ok())
         .count();

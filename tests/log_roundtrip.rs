@@ -258,7 +258,7 @@ fn rotation_by_size_splits_into_numbered_complete_files_losing_nothing() {
             f.to_string_lossy().ends_with(&format!("_{i:03}.mcap")),
             "{f:?}"
         );
-        assert!(drogue_vision::log::recover::is_complete(f).unwrap());
+        assert!(drogue_vision::log::reader::is_complete(f).unwrap());
         for frame in replay::open(f).unwrap() {
             seqs.push(frame.unwrap().seq);
         }
@@ -293,7 +293,7 @@ fn rotation_by_duration_starts_a_new_numbered_file() {
     let summary = log.finish().unwrap();
     assert_eq!(summary.files.len(), 2, "{:?}", summary.files);
     for (i, f) in summary.files.iter().enumerate() {
-        assert!(drogue_vision::log::recover::is_complete(f).unwrap());
+        assert!(drogue_vision::log::reader::is_complete(f).unwrap());
         let seqs: Vec<u64> = replay::open(f).unwrap().map(|r| r.unwrap().seq).collect();
         assert_eq!(seqs, vec![i as u64]);
     }

@@ -25,6 +25,7 @@ mod layer;
 pub mod metadata;
 pub mod oversized;
 pub mod png_gray;
+pub mod reader;
 pub mod recover;
 pub mod replay;
 pub mod review;

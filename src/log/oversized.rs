@@ -820,7 +820,7 @@ mod tests {
         file.extend(plain_chunk(&record(op::MESSAGE, &[2; 40])[..20]));
         file.extend(record(op::MESSAGE, &[3; 64]));
         let source = SkipOversized::new(Cursor::new(file.clone()), file.len() as u64);
-        let opts = super::super::recover::reader_options();
+        let opts = super::super::reader::reader_options();
         let got: Vec<_> = mcap::io::MessageReader::new_with_options(source, opts).collect();
         assert_eq!(got.len(), 1);
         assert!(got[0].is_err());
@@ -897,7 +897,7 @@ mod tests {
     /// (opcode, length) of every record the `mcap` crate's linear reader
     /// reads from `source` (into chunks, CRCs checked), or its first error.
     fn records_read(mut source: impl Read) -> Result<Vec<(u8, usize)>, mcap::McapError> {
-        let opts = super::super::recover::reader_options()
+        let opts = super::super::reader::reader_options()
             .with_skip_end_magic(true)
             .with_prevalidate_chunk_crcs(false);
         let mut reader = mcap::sans_io::LinearReader::new_with_options(opts);

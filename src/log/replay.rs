@@ -9,8 +9,8 @@
 
 use super::oversized::Oversized;
 use super::oversized::RECORD_LIMIT_BYTES;
-use super::recover::{LogMessageReader, counted_message_reader};
-use super::{LogError, recover::message_reader, topics};
+use super::reader::{LogMessageReader, counted_message_reader};
+use super::{LogError, reader::message_reader, topics};
 use crate::camera::CameraModel;
 use crate::frame::{Frame, FrameOrigin};
 use foxglove::Decode;
@@ -100,7 +100,7 @@ impl ReplayReader {
     pub fn first_camera(path: &Path) -> Result<CameraModel, LogError> {
         for message in message_reader(path)? {
             let m = message
-                .map_err(|e| LogError::format(path, super::recover::describe_read_error(&e)))?;
+                .map_err(|e| LogError::format(path, super::reader::describe_read_error(&e)))?;
             if m.channel.topic == topics::CALIBRATION {
                 let cal = CameraCalibration::decode(m.data.as_ref())
                     .map_err(|e| LogError::format(path, format!("/camera/calibration: {e}")))?;
@@ -189,7 +189,7 @@ impl Iterator for ReplayReader {
                     self.finish();
                     return Some(Err(LogError::format(
                         &self.path,
-                        super::recover::describe_read_error(&e),
+                        super::reader::describe_read_error(&e),
                     )));
                 }
             };

@@ -6,7 +6,7 @@ mod plots;
 mod stats;
 
 use super::oversized::RECORD_LIMIT_BYTES;
-use super::recover::{counted_message_reader, is_cut_short};
+use super::reader::{counted_message_reader, is_cut_short};
 use super::{LogError, topics};
 use foxglove::Decode;
 use foxglove::messages::Log;
