@@ -433,7 +433,8 @@ fn log_with_a_big_record(path: &Path, big: usize) -> u64 {
 /// log without it (far less than the record).
 #[test]
 fn an_oversized_mcap_record_is_skipped_and_counted() {
-    use drogue_vision::log::{recover, replay};
+    use drogue_vision::log::recover;
+    use drogue_vision::source::replay;
     const BIG: usize = 48 << 20;
     const { assert!(BIG > drogue_vision::log::oversized::RECORD_LIMIT_BYTES) };
     let dir = tempfile::tempdir().unwrap();

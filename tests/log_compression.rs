@@ -13,9 +13,8 @@
 mod log_support;
 
 use drogue_vision::log::recover::{self, RECOVER_METADATA};
-use drogue_vision::log::{
-    ChunkCompression, FlightLog, LogConfig, LogError, metadata, reader, replay,
-};
+use drogue_vision::log::{ChunkCompression, FlightLog, LogConfig, LogError, metadata, reader};
+use drogue_vision::source::replay;
 use log_support as s;
 use rand::{Rng, SeedableRng};
 use std::path::{Path, PathBuf};

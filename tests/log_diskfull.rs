@@ -5,7 +5,8 @@
 
 mod log_support;
 
-use drogue_vision::log::{reader, recover, replay};
+use drogue_vision::log::{reader, recover};
+use drogue_vision::source::replay;
 use log_support as s;
 use std::sync::atomic::Ordering;
 use std::sync::{Arc, Mutex};

@@ -6,7 +6,8 @@
 
 mod log_support;
 
-use drogue_vision::log::{reader, replay};
+use drogue_vision::log::reader;
+use drogue_vision::source::replay;
 use log_support as s;
 use std::sync::Arc;
 use std::sync::atomic::Ordering;

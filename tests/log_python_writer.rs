@@ -55,7 +55,7 @@ fn a_python_written_zstd_log_is_replayed_processed_reviewed_and_recovered() {
     );
 
     // Replay: every frame, pixel for pixel the PNG written beside it.
-    let frames: Vec<_> = drogue_vision::log::replay::open(&log)
+    let frames: Vec<_> = drogue_vision::source::replay::open(&log)
         .unwrap()
         .map(|f| f.unwrap())
         .collect();

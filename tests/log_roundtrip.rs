@@ -3,7 +3,8 @@
 
 mod log_support;
 
-use drogue_vision::log::{FlightLog, ImageEncoding, LogConfig, replay};
+use drogue_vision::log::{FlightLog, ImageEncoding, LogConfig};
+use drogue_vision::source::replay;
 use foxglove::Decode;
 use foxglove::messages::{
     CameraCalibration, CompressedImage, FrameTransforms, ImageAnnotations, Log, PoseInFrame,

@@ -254,7 +254,7 @@ fn log_in(dir: &Path) -> PathBuf {
 /// records skipped, and ends without an error.
 #[test]
 fn replay_skips_and_counts_records_above_the_bound_in_chunks() {
-    use drogue_vision::log::replay;
+    use drogue_vision::source::replay;
     let dir = tempfile::tempdir().unwrap();
     let path = log_in(dir.path());
     let mut reader = replay::open(&path).unwrap();
@@ -277,7 +277,8 @@ fn replay_skips_and_counts_records_above_the_bound_in_chunks() {
 /// same frames.
 #[test]
 fn recover_skips_and_counts_records_above_the_bound_in_chunks() {
-    use drogue_vision::log::{recover, replay};
+    use drogue_vision::log::recover;
+    use drogue_vision::source::replay;
     let dir = tempfile::tempdir().unwrap();
     let path = log_in(dir.path());
     let out = dir.path().join("rec.mcap");

@@ -19,8 +19,8 @@
 //!
 //! Also here: the `[log]` config ([`LogConfig`]), the message reader every
 //! reader of a log uses ([`reader`]), start-up recovery and `recover`
-//! ([`recover`]), replay of `/camera/image` ([`replay`]) and the post-flight
-//! review ([`review`]).
+//! ([`recover`]) and the post-flight review ([`review`]). Replay of
+//! `/camera/image` is a frame source: `crate::source::replay`.
 
 mod config;
 pub mod crop;
@@ -31,7 +31,6 @@ pub mod oversized;
 pub mod png_gray;
 pub mod reader;
 pub mod recover;
-pub mod replay;
 pub mod review;
 mod send_stamps;
 pub mod storage;
