@@ -277,8 +277,8 @@ pub fn detection(
             theta: 0.0,
         },
         pose_camera: CirclePose {
-            centre_camera_m: Vector3::new(p.y, p.z, p.x),
-            normal_camera: Vector3::new(n.y, n.z, n.x),
+            centre_camera_m: Point::new(Vector3::new(p.y, p.z, p.x)),
+            normal_camera: Direction::new(Vector3::new(n.y, n.z, n.x)),
         },
         alt_pose_camera: None,
         disambiguation: Disambiguation::CanopyRim,

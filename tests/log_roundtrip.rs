@@ -162,17 +162,14 @@ fn check_all_messages(cfg: &LogConfig) {
                 let pose = p.pose.unwrap();
                 let pos = pose.position.unwrap();
                 let want = s::measurement(seq).detection.unwrap().pose_camera;
-                assert_eq!(
-                    [pos.x, pos.y, pos.z],
-                    <[f64; 3]>::from(want.centre_camera_m)
-                );
+                assert_eq!([pos.x, pos.y, pos.z], want.centre_camera_m.to_array());
                 // The drogue's z axis (the normal) from the quaternion.
                 let q = pose.orientation.unwrap();
                 let uq = nalgebra::UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(
                     q.w, q.x, q.y, q.z,
                 ));
                 let z = uq * nalgebra::Vector3::z();
-                assert!((z - want.normal_camera).norm() < 1e-12);
+                assert!((z - *want.normal_camera).norm() < 1e-12);
             }
             "/tf" => {
                 assert_eq!(schema.name, "foxglove.FrameTransforms");

@@ -495,12 +495,16 @@ pub(crate) mod tests {
             },
             pose_camera: CirclePose {
                 // Camera frame = body with the default mount (x right = body y ...).
-                centre_camera_m: Vector3::new(
+                centre_camera_m: Point::new(Vector3::new(
                     position_body_m.y,
                     position_body_m.z,
                     position_body_m.x,
-                ),
-                normal_camera: Vector3::new(normal_body.y, normal_body.z, normal_body.x),
+                )),
+                normal_camera: Direction::new(Vector3::new(
+                    normal_body.y,
+                    normal_body.z,
+                    normal_body.x,
+                )),
             },
             alt_pose_camera: None,
             disambiguation: Disambiguation::CanopyRim,
