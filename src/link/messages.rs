@@ -314,14 +314,10 @@ pub fn landing_target_ned(
     det: &Detection,
     vehicle: &VehiclePose,
 ) -> Option<MavMessage> {
-    // The autopilot's attitude: refused unless close to a unit quaternion.
-    let norm = vehicle.q_ned_body.iter().map(|c| c * c).sum::<f64>().sqrt();
-    if norm.is_nan() || norm <= 0.5 {
-        return None;
-    }
-    let q_ned_body = quaternion_from_wxyz(vehicle.q_ned_body)?;
-    let vehicle_ned_m = Vector3::from(vehicle.position_ned_m);
-    let target_ned_m = vehicle_ned_m + q_ned_body * pose.position_body_m;
+    // The autopilot's attitude, refused unless finite and normalised once
+    // more (w first and back: the same bits as when it crossed as an array).
+    let q_ned_body = quaternion_from_wxyz(quaternion_to_wxyz(&vehicle.q_ned_body))?;
+    let target_ned_m = *vehicle.position_ned_m + q_ned_body * pose.position_body_m;
     if !finite3(&target_ned_m) {
         return None;
     }
@@ -597,8 +593,8 @@ pub(crate) mod tests {
         let yaw90 = UnitQuaternion::from_euler_angles(0.0, 0.0, std::f64::consts::FRAC_PI_2);
         let vehicle = VehiclePose {
             time_ns: m.capture_time_ns,
-            position_ned_m: [100.0, 20.0, -50.0],
-            q_ned_body: quaternion_to_wxyz(&yaw90),
+            position_ned_m: Point::from_array([100.0, 20.0, -50.0]),
+            q_ned_body: yaw90,
         };
         let MavMessage::LANDING_TARGET(ned) =
             landing_target_ned(&m, &pose, &det, &vehicle).unwrap()
