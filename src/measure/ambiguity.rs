@@ -366,17 +366,12 @@ fn support_on(
 mod tests {
     use super::*;
     use crate::spatial::{Direction, Point};
+    use crate::testing::vga_camera;
     use image::Luma;
-    use nalgebra::Matrix3;
     use nalgebra::Vector3;
 
     fn camera() -> CameraModel {
-        lens([0.0; 5])
-    }
-
-    fn lens(distortion: [f64; 5]) -> CameraModel {
-        let k = Matrix3::new(800.0, 0.0, 320.0, 0.0, 800.0, 240.0, 0.0, 0.0, 1.0);
-        CameraModel::new("t", 640, 480, k, distortion).unwrap()
+        vga_camera([0.0; 5])
     }
 
     /// Paints a synthetic drogue, exact per pixel centre: sky 170, canopy 150,
@@ -410,7 +405,7 @@ mod tests {
         // Strong barrel distortion: an undistorted prediction would miss.
         // Off-centre, where it moves the rim by several pixels.
         support_through(
-            &lens([-0.3, 0.1, 0.001, -0.001, 0.0]),
+            &vga_camera([-0.3, 0.1, 0.001, -0.001, 0.0]),
             Vector3::new(0.6, 0.4, 3.0),
         );
     }
