@@ -61,11 +61,10 @@ pub const DROGUE_REFERENCE_SETS: [&str; 8] = [
 /// # Panics
 /// When the variable is unset or its folder has no `paper10/` set.
 pub fn reference_dir() -> PathBuf {
-    let dir = std::env::var_os(REFERENCE_DIR_VAR)
-        .map(PathBuf::from)
-        .unwrap_or_else(|| {
-            panic!("{REFERENCE_DIR_VAR} is not set: it must name the reference frames' folder")
-        });
+    let dir = std::env::var_os(REFERENCE_DIR_VAR).map_or_else(
+        || panic!("{REFERENCE_DIR_VAR} is not set: it must name the reference frames' folder"),
+        PathBuf::from,
+    );
     assert!(
         dir.join("paper10").is_dir(),
         "{REFERENCE_DIR_VAR}={} is not the reference frames' folder (no paper10/ in it)",

@@ -99,7 +99,7 @@ fn mcap_an_attachment_without_room_for_its_crc() {
     match recover::recover(&input, &out) {
         Ok(report) => {
             assert!(report.unreadable_records >= 1, "{report}");
-            let copied = replay::open(&out).unwrap().filter(|f| f.is_ok()).count();
+            let copied = replay::open(&out).unwrap().flatten().count();
             let read = frames.iter().filter(|f| f.is_ok()).count();
             assert!(copied >= read, "{copied} frames copied, {read} read");
         }

@@ -131,7 +131,7 @@ fn a_zstd_log_cut_at_20_random_offsets_keeps_every_complete_chunk() {
             n,
         ));
     }
-    chunks.sort();
+    chunks.sort_unstable();
     let data_end = chunks.last().unwrap().1;
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(14);
     for _ in 0..20 {

@@ -275,8 +275,7 @@ impl Scenario {
                 .message()
                 .split('`')
                 .nth(1)
-                .map(str::to_string)
-                .unwrap_or_else(|| "(toml)".into());
+                .map_or_else(|| "(toml)".into(), str::to_string);
             SimError::Scenario {
                 file: file_name.to_string(),
                 key,

@@ -150,7 +150,10 @@ impl Level {
 /// The sweep's levels: each factor over its range, then everything at once,
 /// then the drogue-free kinds.
 pub fn standard_levels() -> Vec<Level> {
-    use Factor::*;
+    use Factor::{
+        Baseline, Blur, CanopylessDisc, Crescent, DarkRing, DarkShapes, Distortion, Distractors,
+        Everything, Exposure, Glare, Haze, Noise, Occlusion, Range, Tilt, Vignetting,
+    };
     let mut levels = vec![Level::new(Baseline, 0.0)];
     let mut add = |f: Factor, values: &[f64]| {
         levels.extend(values.iter().map(|&v| Level::new(f, v)));

@@ -129,7 +129,7 @@ impl Counters {
     pub fn now_ns(&self) -> u64 {
         self.clock
             .read()
-            .unwrap_or_else(|p| p.into_inner())
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
             .now_ns()
     }
 }
@@ -257,7 +257,7 @@ impl LogHandle {
         } else {
             match self.shared.tx.try_send(item) {
                 Ok(()) => true,
-                Err(TrySendError::Full(_)) | Err(TrySendError::Disconnected(_)) => false,
+                Err(TrySendError::Full(_) | TrySendError::Disconnected(_)) => false,
             }
         };
         if !sent {
@@ -275,7 +275,7 @@ impl LogHandle {
             .counters
             .clock
             .write()
-            .unwrap_or_else(|p| p.into_inner()) = clock;
+            .unwrap_or_else(std::sync::PoisonError::into_inner) = clock;
     }
 
     /// Wait for room in the queue instead of dropping (`run --fast`: nothing

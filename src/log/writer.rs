@@ -104,8 +104,7 @@ impl Writer {
     pub(crate) fn set_exact_path(&mut self, path: PathBuf) {
         self.base = path
             .file_stem()
-            .map(|s| s.to_string_lossy().into_owned())
-            .unwrap_or_else(|| "log".into());
+            .map_or_else(|| "log".into(), |s| s.to_string_lossy().into_owned());
         self.exact_path = Some(path);
     }
 
@@ -286,7 +285,10 @@ impl Writer {
         };
         // Records with latency stamps (from `run`) of detected frames wait
         // for their pose to be sent; the rest are complete now.
-        let stamped = record.json.get("latency_ns").is_some_and(|v| v.is_object());
+        let stamped = record
+            .json
+            .get("latency_ns")
+            .is_some_and(serde_json::Value::is_object);
         let ready = match (stamped, m.detection.is_some()) {
             (true, true) => self.send_stamps.hold(record, Instant::now()),
             // No detection, no pose message.
@@ -334,7 +336,7 @@ impl Writer {
     fn stats(&mut self, record: &serde_json::Value) {
         let t = record
             .get("time_ns")
-            .and_then(|v| v.as_u64())
+            .and_then(serde_json::Value::as_u64)
             .unwrap_or_else(|| self.counters.now_ns());
         let mut buf = std::mem::take(&mut self.buf);
         self.write_json(topics::STATS, 0, t, t, record, &mut buf);

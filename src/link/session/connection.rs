@@ -109,7 +109,7 @@ pub(crate) async fn connection_task(
         let wake = tokio::time::Instant::now() + backoff;
         loop {
             tokio::select! {
-                _ = sleep_until(wake) => break,
+                () = sleep_until(wake) => break,
                 _ = shutdown.changed() => return,
                 o = out.recv() => match o {
                     Some(o) => {

@@ -28,7 +28,7 @@ pub(crate) fn build_pose_messages(ctx: &Context, m: &Measurement, out: &mut Vec<
     for kind in &ctx.settings.cfg.messages {
         match kind {
             PoseMessage::LandingTarget => {
-                out.push(messages::landing_target_body(m, &pose, det).into())
+                out.push(messages::landing_target_body(m, &pose, det).into());
             }
             PoseMessage::LandingTargetNed => {
                 let vehicle = lock(&ctx.telemetry).pose_at(m.capture_time_ns);
@@ -38,7 +38,7 @@ pub(crate) fn build_pose_messages(ctx: &Context, m: &Measurement, out: &mut Vec<
                 }
             }
             PoseMessage::VisionPositionEstimate => {
-                out.push(messages::vision_position_estimate(m, &pose, det).into())
+                out.push(messages::vision_position_estimate(m, &pose, det).into());
             }
             PoseMessage::Odometry => out.push(messages::odometry(m, &pose, det).into()),
             PoseMessage::TargetRelative => {
@@ -89,7 +89,7 @@ pub(crate) async fn pose_task(
             let now = tokio::time::Instant::now();
             if let Some(wait) = limit.wait_s(now.duration_since(wall_start).as_secs_f64()) {
                 tokio::select! {
-                    _ = sleep_until(now + wait) => {}
+                    () = sleep_until(now + wait) => {}
                     _ = shutdown.changed() => return,
                 }
             }

@@ -51,13 +51,10 @@ impl<R: Read + Seek> SkipOversized<R> {
         let Some(file) = self.inner.take() else {
             return Ok(false);
         };
-        let content = match ChunkContent::new(compression, file, compressed) {
-            Ok(Some(c)) => c,
-            _ => {
-                return Err(io::Error::other(
-                    "a chunk's decoder could not be made a second time",
-                ));
-            }
+        let Ok(Some(content)) = ChunkContent::new(compression, file, compressed) else {
+            return Err(io::Error::other(
+                "a chunk's decoder could not be made a second time",
+            ));
         };
         let dropped: u64 = walk.oversized.iter().map(|&(_, n)| n).sum();
         let kept = size - dropped;

@@ -85,12 +85,9 @@ impl<W: Write + Seek> Copier<W> {
             self.report.unreadable_records += 1;
             return Ok(false);
         }
-        let record = match mcap::parse_record(opcode, body) {
-            Ok(r) => r,
-            Err(_) => {
-                self.report.unreadable_records += 1;
-                return Ok(false);
-            }
+        let Ok(record) = mcap::parse_record(opcode, body) else {
+            self.report.unreadable_records += 1;
+            return Ok(false);
         };
         match record {
             Record::Schema { header, data } => {

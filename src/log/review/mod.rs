@@ -85,9 +85,7 @@ pub fn review(log: &Path, out_dir: &Path) -> Result<ReviewReport, LogError> {
     super::check_mcap_input(log)?;
     if out_dir.exists() {
         let earlier_review = out_dir.join("poses.csv").is_file();
-        let empty = std::fs::read_dir(out_dir)
-            .map(|mut d| d.next().is_none())
-            .unwrap_or(false);
+        let empty = std::fs::read_dir(out_dir).is_ok_and(|mut d| d.next().is_none());
         if !(earlier_review || empty) {
             return Err(LogError::Config(format!(
                 "{} exists and is not an earlier review: choose another --out",
@@ -405,7 +403,7 @@ fn full_frame_every(metadata: &[(String, BTreeMap<String, String>)]) -> u64 {
         == Some("crop");
     let every = log
         .and_then(|l| l.get("full_frame_every"))
-        .and_then(|v| v.as_integer())
+        .and_then(toml::Value::as_integer)
         .and_then(|n| u64::try_from(n).ok())
         .filter(|&n| n >= 1);
     match (crop, every) {

@@ -252,7 +252,7 @@ impl Writer {
     pub(super) fn report(&mut self, level: Level, message: String) {
         match level {
             Level::Error | Level::Fatal => {
-                tracing::error!(target: "drogue_vision::log", "{message}")
+                tracing::error!(target: "drogue_vision::log", "{message}");
             }
             Level::Warning => tracing::warn!(target: "drogue_vision::log", "{message}"),
             _ => tracing::info!(target: "drogue_vision::log", "{message}"),
