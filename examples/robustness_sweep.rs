@@ -4,6 +4,8 @@
 //! `--frames` is per level (default 10, the test's); `--seed` changes the
 //! scenes (default the test's); `--only` keeps the levels whose label
 //! contains TEXT (e.g. `range`); `--dump` writes the frames to DIR as PNG.
+//! `SWEEP_TRACE=1` prints each frame's truth and result on stderr, and
+//! `RUST_LOG=drogue_vision::measure::detect=debug` the detector's reasons.
 
 #[path = "../tests/sweep/mod.rs"]
 mod sweep;
@@ -19,6 +21,12 @@ fn usage(message: &str) -> ! {
 }
 
 fn main() {
+    // `RUST_LOG=drogue_vision::measure::detect=debug` shows why each
+    // candidate was rejected; `SWEEP_TRACE=1` prints one line per frame.
+    tracing_subscriber::fmt()
+        .with_env_filter(tracing_subscriber::EnvFilter::from_default_env())
+        .with_writer(std::io::stderr)
+        .init();
     let mut frames: u64 = 10;
     let mut seed = sweep::SEED;
     let mut only: Option<String> = None;

@@ -265,13 +265,23 @@ fn the_view_and_landing_target_ned_follow_the_autopilot() {
     let autopilot = Autopilot::start(Some(script), 50.0);
     let (received, stderr) = closed_loop_run(tmp.path(), &scenario, &config, autopilot);
 
-    // Every frame is logged, each with its truth in the autopilot's frame.
+    // Every frame is logged, each with its truth in the autopilot's frame;
+    // on a starved machine the log writer (nice 10, below the measurement)
+    // may fall behind and drop a few items, which the summary then counts.
     let frames = frames_in_summary(&stderr);
+    let not_logged = not_logged_in_summary(&stderr);
+    assert!(
+        not_logged <= frames / 20,
+        "{not_logged} log items dropped of {frames} frames"
+    );
     let log = read_log(&only_log(&logs));
     let images = log.iter().filter(|m| m.topic == "/camera/image").count() as u64;
     let truths = logged_truths(&log);
-    assert_eq!(images, frames);
-    assert_eq!(truths.len() as u64, frames);
+    assert!(
+        images <= frames && images + not_logged >= frames,
+        "{images} images of {frames} frames, {not_logged} items not logged"
+    );
+    assert!(truths.len() as u64 <= frames && truths.len() as u64 + not_logged >= frames);
     // Frames the rendering was too late for are dropped (as a camera drops
     // them); a few at most.
     assert!(frames >= 250, "only {frames} frames of the 285");
@@ -591,4 +601,16 @@ fn closed_loop_setup_errors_exit_2() {
         let err = String::from_utf8_lossy(&out.stderr);
         assert!(err.contains(says), "{args:?}: {err}");
     }
+}
+
+/// The log items the run's summary says were not logged (0 when it says
+/// nothing).
+fn not_logged_in_summary(stderr: &str) -> u64 {
+    stderr
+        .lines()
+        .find_map(|l| {
+            let (before, _) = l.split_once(" items not logged")?;
+            before.rsplit(['(', ' ']).next()?.parse().ok()
+        })
+        .unwrap_or(0)
 }

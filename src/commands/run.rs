@@ -162,7 +162,7 @@ pub fn report(summary: &RunSummary) -> String {
         );
         format!(
             "run {}: {} frames, {} measured, {} detected ({rate:.1} %), {} skipped (measurement busy), \
-             {} unreadable, source late {} times{held}{}{resources_line}\nlog: {}",
+             {} unreadable, source late {} times{held}{}{resources_line}\nlog: {}{}",
             if s.interrupted {
                 "interrupted"
             } else {
@@ -175,7 +175,15 @@ pub fn report(summary: &RunSummary) -> String {
             s.unreadable,
             s.source_late,
             link_line,
-            files.join(", ")
+            files.join(", "),
+            if s.log_dropped > 0 {
+                format!(
+                    " ({} items not logged: the writer fell behind or a write failed)",
+                    s.log_dropped
+                )
+            } else {
+                String::new()
+            }
         )
     }
 }

@@ -50,6 +50,10 @@ const TOLERANCE_PX: f64 = 0.75;
 /// ~1 grey level/px of derivative noise: 6 keeps noise-only maxima out, while
 /// a rim against the sky gives tens.
 const MIN_EDGE_GREY_PER_PX: f64 = 6.0;
+/// Below this support of the better solution on a brightening edge, the
+/// rim's darkening edge is tried too (`[ambiguity] canopy_min_support`'s
+/// default: below it the tracker does not use the rim anyway).
+const DARKENING_FALLBACK_BELOW: f64 = 0.5;
 /// Share of the predicted rim that must fall inside the image to judge.
 const MIN_SHARE_IN_IMAGE: f64 = 0.5;
 /// Smallest predicted rim (semi-minor axis, pixels) worth judging: below this
@@ -77,16 +81,32 @@ const SEARCH_STEPS: usize = (2.0 * SEARCH_PX / SEARCH_STEP_PX) as usize + 1;
 const PROFILE_LEN: usize = SEARCH_STEPS + 2 * STEPS_PER_PX;
 const STEPS_PER_PX: usize = (1.0 / SEARCH_STEP_PX) as usize;
 
+/// Which way the grey level steps going outward across the canopy's rim.
+/// The rim's dark band against a clear sky brightens outward; under heavy
+/// haze the airlight lifts the band above a darker patch of sky (or a
+/// vignetted corner) and the drogue's edge then darkens outward.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Polarity {
+    /// The strongest outward brightening is the edge.
+    Brightening,
+    /// The outermost outward darkening is the edge: the band's inner side
+    /// (canopy to band) darkens outward too, a band's width further in.
+    Darkening,
+}
+
 /// Where across the predicted curve the strongest outward brightening lies:
 /// its offset from `p` along the unit image direction `out` (pixels,
 /// sub-pixel by a parabola through the peak) if it is within `SEARCH_PX` and
 /// at least `MIN_EDGE_GREY_PER_PX` strong; `Some(None)` for no edge; `None`
 /// if the search leaves the image. `grey` is scratch for the profile.
+/// With [`Polarity::Darkening`], the outermost local maximum of the outward
+/// darkening of that strength instead.
 fn outward_edge_offset(
     image: &GrayImage,
     p: [f64; 2],
     out: [f64; 2],
     grey: &mut Vec<f32>,
+    polarity: Polarity,
 ) -> Option<Option<f64>> {
     // The detector's ray sampler: bilinear, stopping at the image border.
     let start = -SEARCH_PX - 1.0;
@@ -96,14 +116,30 @@ fn outward_edge_offset(
         return None;
     }
     // Central difference over 2 px at each searched offset.
+    let sign = match polarity {
+        Polarity::Brightening => 1.0,
+        Polarity::Darkening => -1.0,
+    };
     let mut gradient = [0.0; SEARCH_STEPS];
     for (i, g) in gradient.iter_mut().enumerate() {
-        *g = f64::from(grey[i + 2 * STEPS_PER_PX] - grey[i]) / 2.0;
+        *g = sign * f64::from(grey[i + 2 * STEPS_PER_PX] - grey[i]) / 2.0;
     }
-    let (i_best, &best) = gradient
-        .iter()
-        .enumerate()
-        .max_by(|a, b| a.1.total_cmp(b.1))?;
+    let found = match polarity {
+        Polarity::Brightening => gradient
+            .iter()
+            .enumerate()
+            .max_by(|a, b| a.1.total_cmp(b.1))
+            .map(|(i, &g)| (i, g)),
+        Polarity::Darkening => (0..SEARCH_STEPS).rev().find_map(|i| {
+            let g = gradient[i];
+            let peak =
+                (i == 0 || gradient[i - 1] <= g) && (i + 1 == SEARCH_STEPS || gradient[i + 1] <= g);
+            (peak && g >= MIN_EDGE_GREY_PER_PX).then_some((i, g))
+        }),
+    };
+    let Some((i_best, best)) = found else {
+        return Some(None);
+    };
     if best < MIN_EDGE_GREY_PER_PX {
         return Some(None);
     }
@@ -167,6 +203,12 @@ pub fn canopy_support(
 /// less than half a pixel apart and the answer is `None`; at 8 m they are
 /// about a pixel apart, which a clear rim's edges (scatter ~0.1 px) still
 /// resolve.
+///
+/// The edge is an outward brightening (the band against the sky); when
+/// that leaves the rim without a say or its better solution below
+/// [`DARKENING_FALLBACK_BELOW`], the outward darkening of a band lifted by
+/// haze above the sky is tried, and the polarity whose better solution has
+/// more support answers.
 pub fn canopy_supports(
     image: &GrayImage,
     camera: &CameraModel,
@@ -177,7 +219,34 @@ pub fn canopy_supports(
     let [Some(rim0), Some(rim1)] = &rims else {
         return [None, None];
     };
-    let offsets = [edge_offsets(image, rim0), edge_offsets(image, rim1)];
+    let best = |s: &[Option<f64>; 2]| {
+        s.iter()
+            .flatten()
+            .copied()
+            .fold(None, |m: Option<f64>, x| Some(m.map_or(x, |m| m.max(x))))
+    };
+    let bright = supports_with(image, [rim0, rim1], Polarity::Brightening);
+    if best(&bright).is_some_and(|b| b >= DARKENING_FALLBACK_BELOW) {
+        return bright;
+    }
+    let dark = supports_with(image, [rim0, rim1], Polarity::Darkening);
+    match (best(&bright), best(&dark)) {
+        (_, None) => bright,
+        (Some(b), Some(d)) if b >= d => bright,
+        _ => dark,
+    }
+}
+
+/// [`canopy_supports`] for one polarity of the rim's edge.
+fn supports_with(
+    image: &GrayImage,
+    [rim0, rim1]: [&[RimPoint]; 2],
+    polarity: Polarity,
+) -> [Option<f64>; 2] {
+    let offsets = [
+        edge_offsets(image, rim0, polarity),
+        edge_offsets(image, rim1, polarity),
+    ];
     let in_image = |o: &[Option<Option<f64>>]| o.iter().filter(|x| x.is_some()).count();
     if offsets
         .iter()
@@ -237,10 +306,14 @@ pub fn canopy_supports(
 
 /// Per rim point, the outward edge's offset from it (`Some(None)`: no edge,
 /// `None`: outside the image).
-fn edge_offsets(image: &GrayImage, rim: &[RimPoint]) -> Vec<Option<Option<f64>>> {
+fn edge_offsets(
+    image: &GrayImage,
+    rim: &[RimPoint],
+    polarity: Polarity,
+) -> Vec<Option<Option<f64>>> {
     let mut grey = Vec::with_capacity(PROFILE_LEN);
     rim.iter()
-        .map(|p| outward_edge_offset(image, p.at, p.out, &mut grey))
+        .map(|p| outward_edge_offset(image, p.at, p.out, &mut grey, polarity))
         .collect()
 }
 
@@ -347,7 +420,8 @@ fn support_on(
     let (mut in_image, mut judged, mut with_edge) = (0usize, 0usize, 0usize);
     let mut grey = Vec::with_capacity(PROFILE_LEN);
     for (k, p) in rim.iter().enumerate() {
-        let Some(edge) = outward_edge_offset(image, p.at, p.out, &mut grey) else {
+        let Some(edge) = outward_edge_offset(image, p.at, p.out, &mut grey, Polarity::Brightening)
+        else {
             continue;
         };
         in_image += 1;
@@ -377,22 +451,53 @@ mod tests {
     /// Paints a synthetic drogue, exact per pixel centre: sky 170, canopy 150,
     /// dark band at the rim (r in [0.30, 0.33]) 70, inner circle 30.
     fn render(cam: &CameraModel, pose: &CirclePose) -> GrayImage {
+        render_levels(cam, pose, [30, 150, 70, 170])
+    }
+
+    /// Disc, canopy, band and sky levels.
+    fn render_levels(cam: &CameraModel, pose: &CirclePose, levels: [u8; 4]) -> GrayImage {
         let n = pose.normal_camera;
         GrayImage::from_fn(640, 480, |x, y| {
             let ray = cam.ray_camera(cam.undistort_px([f64::from(x), f64::from(y)]));
             let t = n.dot(&pose.centre_camera_m) / n.dot(&ray);
             let r = (ray * t - *pose.centre_camera_m).norm();
             let g = if r < 0.15 {
-                30
+                levels[0]
             } else if r < 0.30 {
-                150
+                levels[1]
             } else if r < 0.33 {
-                70
+                levels[2]
             } else {
-                170
+                levels[3]
             };
             Luma([g])
         })
+    }
+
+    /// Under haze the band (150) is lighter than the sky (130): the
+    /// brightening test sees no rim, the darkening one tells the true pose
+    /// from its mirror, and neither takes the canopy-to-band edge (r = 0.30,
+    /// also darkening outward) for the rim.
+    #[test]
+    fn a_hazy_rim_that_darkens_outward_decides_for_the_true_pose() {
+        let cam = camera();
+        let n = nalgebra::Rotation3::new(Vector3::new(0.0, 0.6, 0.2)) * -Vector3::z();
+        let truth = CirclePose {
+            centre_camera_m: Vector3::new(0.1, -0.05, 3.0),
+            normal_camera: n.normalize(),
+        };
+        let mirrored = CirclePose {
+            normal_camera: Vector3::new(-n.x, -n.y, n.z).normalize(),
+            ..truth
+        };
+        let image = render_levels(&cam, &truth, [110, 180, 150, 130]);
+        let bright = canopy_support(&image, &cam, &truth, 0.33).unwrap();
+        assert!(bright < 0.1, "brightening support {bright}");
+        let [t, m] = canopy_supports(&image, &cam, &[truth, mirrored], 0.33);
+        let (t, m) = (t.expect("decided"), m.expect("decided"));
+        assert!(t > 0.9 && m < 0.5, "true {t}, mirror {m}");
+        let [t, m] = canopy_supports(&image, &cam, &[mirrored, truth], 0.33);
+        assert!(t.unwrap() < 0.5 && m.unwrap() > 0.9, "order swapped");
     }
 
     #[test]

@@ -173,6 +173,28 @@ fn score(stats: &mut LevelStats, m: &Measurement, truth: Option<&DrogueTruth>) {
     stats.normal_deg.push(normal_deg);
 }
 
+/// One line per frame on stderr (`SWEEP_TRACE` set): the truth's ellipse,
+/// range and tilt, and what the measurement gave, for studying misses.
+fn trace_frame(label: &str, index: u64, m: &Measurement, truth: Option<&DrogueTruth>) {
+    let truth = truth.map_or("no drogue".to_string(), |t| {
+        format!(
+            "truth centre ({:.1}, {:.1}) axes {:.1}/{:.1} range {:.2} m tilt {:.0} deg",
+            t.ellipse.cx, t.ellipse.cy, t.ellipse.a, t.ellipse.b, t.range_m, t.tilt_deg
+        )
+    });
+    let found = m
+        .detection
+        .as_ref()
+        .map_or("not detected".to_string(), |d| {
+            let e = &d.ellipse_px;
+            format!(
+                "found centre ({:.1}, {:.1}) axes {:.1}/{:.1} {:?}",
+                e.cx, e.cy, e.a, e.b, d.disambiguation
+            )
+        });
+    eprintln!("{label} {index:03}: {truth}; {found}");
+}
+
 /// Renders and measures `frames` frames of `level`; with `dump`, also
 /// writes each frame there as `<level>_<index>.png`.
 pub fn run_level(
@@ -188,6 +210,7 @@ pub fn run_level(
         drogue: level.factor.has_drogue(),
         ..Default::default()
     };
+    let trace = std::env::var_os("SWEEP_TRACE").is_some();
     for index in 0..frames {
         let f = sweep.frame(level, index);
         if let Some(dir) = dump {
@@ -215,6 +238,9 @@ pub fn run_level(
             origin: FrameOrigin::File(PathBuf::from(format!("sweep/{}/{index}", level.label()))),
         });
         stats.frames += 1;
+        if trace {
+            trace_frame(&level.label(), index, &m, f.drogue.as_ref());
+        }
         score(&mut stats, &m, f.drogue.as_ref());
     }
     stats

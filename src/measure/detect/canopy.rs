@@ -47,6 +47,22 @@ const SATURATED_GRAY: f32 = 250.0;
 /// Fewest rim points in the image (and not saturated) for a pose's rim to
 /// be judged.
 const MIN_JUDGED: usize = 12;
+/// Fewest background samples beyond the predicted rim for the
+/// polarity-free test ([`outer_edge_offset`]).
+const OUTER_MIN_BACKGROUND: usize = 3;
+/// Points of the canopy sampled by [`canopy_between`], from this share of
+/// the disc's radius (past its blurred rim) to this share of the canopy
+/// rim's (inside its band).
+const ANNULUS_SAMPLES: usize = 5;
+const ANNULUS_FROM_INNER: f64 = 1.3;
+const ANNULUS_TO_OUTER: f64 = 0.85;
+/// The polarity-free test reads the background out to this share of the
+/// canopy rim's radius beyond it: past the rim's dark band (a few percent
+/// of the radius) and its blur.
+const OUTER_BACKGROUND_RADII: f64 = 0.3;
+/// Share of the profile inside the drogue's outer edge that must be off
+/// the background's level: the band and canopy are, a noise spike is not.
+const OUTER_MIN_INSIDE_SHARE: f64 = 0.7;
 
 /// The drogue's two circles, metres.
 #[derive(Clone, Copy, Debug)]
@@ -70,20 +86,30 @@ pub struct RimEdge<'a> {
     /// [`MAX_JUDGED_WIDTH_RADII`] of the canopy rim's radius the thin rim
     /// is smeared out and not judged.
     pub widths: &'a [(f64, f64)],
+    /// The disc's rim mid level by direction: (image angle about the
+    /// ellipse's centre, radians; gray level). The polarity-free test
+    /// ([`outer_edge_offset`]) counts a ray only where the canopy between
+    /// the disc and the predicted rim is lighter than this: a dark shape
+    /// next to the candidate (a blob's other arm, the probe) is not canopy.
+    pub mids: &'a [(f64, f32)],
 }
 
 impl RimEdge<'_> {
     /// The disc's step width nearest to image angle `angle`, pixels.
     fn width_at(&self, angle: f64) -> f64 {
-        let gap = |a: f64| {
-            let d = (a - angle).rem_euclid(std::f64::consts::TAU);
-            d.min(std::f64::consts::TAU - d)
-        };
-        self.widths
-            .iter()
-            .min_by(|x, y| gap(x.0).total_cmp(&gap(y.0)))
-            .map_or(2.0, |w| w.1)
+        nearest(self.widths, angle).map_or(2.0, |w| w.1)
     }
+
+    /// The disc's rim mid level nearest to image angle `angle`.
+    fn mid_at(&self, angle: f64) -> Option<f32> {
+        nearest(self.mids, angle).map(|m| m.1)
+    }
+}
+
+/// The entry of `by_angle` nearest in angle to `angle`.
+fn nearest<T>(by_angle: &[(f64, T)], angle: f64) -> Option<&(f64, T)> {
+    let gap = |a: f64| super::angle_gap(a, angle);
+    by_angle.iter().min_by(|x, y| gap(x.0).total_cmp(&gap(y.0)))
 }
 
 /// The canopy evidence of a candidate: the larger of its two poses'
@@ -103,8 +129,7 @@ pub fn ring_support(
     poses
         .iter()
         .filter_map(|pose| {
-            let (judged, seen) =
-                pose_ring(image, camera, pose, drogue.canopy_radius_m, edge, profile);
+            let (judged, seen) = pose_ring(image, camera, pose, drogue, edge, profile);
             (judged >= MIN_JUDGED).then(|| seen as f64 / judged as f64)
         })
         .max_by(f64::total_cmp)
@@ -115,10 +140,11 @@ fn pose_ring(
     image: &GrayImage,
     camera: &CameraModel,
     pose: &CirclePose,
-    canopy_radius_m: f64,
+    drogue: DrogueCircles,
     edge: RimEdge,
     profile: &mut Vec<f32>,
 ) -> (usize, usize) {
+    let canopy_radius_m = drogue.canopy_radius_m;
     let Some((e1, e2)) = circle_plane_basis(&pose.normal_camera) else {
         return (0, 0);
     };
@@ -126,6 +152,7 @@ fn pose_ring(
     let Some(centre) = camera.project_px(&pose.centre_camera_m) else {
         return (0, 0);
     };
+    let inner_radius_m = drogue.inner_radius_m;
     let (mut judged, mut seen) = (0, 0);
     for k in 0..SAMPLES {
         let t = std::f64::consts::TAU * k as f64 / SAMPLES as f64;
@@ -142,9 +169,8 @@ fn pose_ring(
         }
         let out = [d[0] / len, d[1] / len];
         let radius_px = (p[0] - centre[0]).hypot(p[1] - centre[1]);
-        let width = edge
-            .width_at((p[1] - centre[1]).atan2(p[0] - centre[0]))
-            .max(2.0);
+        let angle = (p[1] - centre[1]).atan2(p[0] - centre[0]);
+        let width = edge.width_at(angle).max(2.0);
         if width > MAX_JUDGED_WIDTH_RADII * radius_px {
             continue;
         }
@@ -180,11 +206,132 @@ fn pose_ring(
         let tolerance = (TOLERANCE_RADII * radius_px)
             .max(MIN_TOLERANCE_PX)
             .max(0.25 * width);
-        if strongest >= edge.min_step_gray && offset.abs() <= tolerance {
+        let brightening = strongest >= edge.min_step_gray && offset.abs() <= tolerance;
+        let mut outer_edge = || {
+            // The background is read well beyond the rim's band: a band
+            // read as background would make the canopy's edge against it
+            // (darkening outward, inside the true rim) look like the rim.
+            let start = -search - half;
+            rim::profile(
+                image,
+                p,
+                out,
+                start,
+                (OUTER_BACKGROUND_RADII * radius_px).max(search + half),
+                STEP_PX,
+                profile,
+            );
+            outer_edge_offset(profile, lag, start, tolerance + half, edge.min_step_gray)
+                .is_some_and(|o| o.abs() <= tolerance)
+                && edge.mid_at(angle).is_some_and(|mid| {
+                    canopy_between(
+                        image,
+                        camera,
+                        pose,
+                        &radial,
+                        inner_radius_m,
+                        canopy_radius_m,
+                        mid,
+                    )
+                })
+        };
+        if brightening || outer_edge() {
             seen += 1;
         }
     }
     (judged, seen)
+}
+
+/// Whether the canopy between the disc and its outer rim, along the 3-D
+/// radial direction `radial` of `pose`'s plane, is lighter than the disc's
+/// rim mid level `mid`: at [`ANNULUS_SAMPLES`] points from
+/// [`ANNULUS_FROM_INNER`] of the disc's radius to [`ANNULUS_TO_OUTER`] of
+/// the rim's, all but one lighter (one may fall on a strut's shadow or a
+/// cable). Saturated samples count as light.
+fn canopy_between(
+    image: &GrayImage,
+    camera: &CameraModel,
+    pose: &CirclePose,
+    radial: &nalgebra::Vector3<f64>,
+    inner_radius_m: f64,
+    canopy_radius_m: f64,
+    mid: f32,
+) -> bool {
+    let from = ANNULUS_FROM_INNER * inner_radius_m;
+    let to = ANNULUS_TO_OUTER * canopy_radius_m;
+    if to.partial_cmp(&from) != Some(std::cmp::Ordering::Greater) {
+        return false;
+    }
+    let mut dark = 0;
+    for j in 0..ANNULUS_SAMPLES {
+        let rho = from + (to - from) * j as f64 / (ANNULUS_SAMPLES - 1) as f64;
+        let Some([u, v]) = camera.project_px(&(pose.centre_camera_m + rho * radial)) else {
+            return false;
+        };
+        let Some(value) = rim::sample(image, u, v) else {
+            return false;
+        };
+        if value < mid {
+            dark += 1;
+            if dark > 1 {
+                return false;
+            }
+        }
+    }
+    true
+}
+
+/// Where the drogue ends along a profile across the predicted rim (samples
+/// [`STEP_PX`] apart from offset `start`, pixels): the outermost place where
+/// the profile leaves the background's level by at least `min_step`, with
+/// most of the profile inside it off that level too (band and canopy), or
+/// `None`. The background is the median of the samples beyond offset
+/// `outside_from`.
+///
+/// Either polarity counts. The rim band is darker than a clear sky, but haze
+/// lifts the band toward the airlight, above a darker patch of sky or a
+/// vignetted corner; the band then darkens outward to the sky instead of
+/// brightening, and only the polarity-free test sees the canopy's edge.
+fn outer_edge_offset(
+    profile: &[f32],
+    lag: usize,
+    start: f64,
+    outside_from: f64,
+    min_step: f32,
+) -> Option<f64> {
+    let first_outside = ((outside_from - start) / STEP_PX).ceil().max(0.0) as usize;
+    let mut outside: Vec<f32> = profile.get(first_outside..)?.to_vec();
+    if outside.len() < OUTER_MIN_BACKGROUND {
+        return None;
+    }
+    let mid = outside.len() / 2;
+    let background = *outside.select_nth_unstable_by(mid, f32::total_cmp).1;
+    // Box means of `lag + 1` samples (the disc's step width): the noise of
+    // single samples would leave the background anywhere.
+    let n = lag + 1;
+    if profile.len() < 2 * n {
+        return None;
+    }
+    let means: Vec<f32> = profile
+        .windows(n)
+        .map(|w| w.iter().sum::<f32>() / n as f32)
+        .collect();
+    let off = |m: f32| (m - background).abs() >= min_step;
+    let edge = means.iter().rposition(|&m| off(m))?;
+    let inside = &means[..=edge];
+    let away = inside.iter().filter(|&&m| off(m)).count();
+    if (away as f64) < OUTER_MIN_INSIDE_SHARE * inside.len() as f64 {
+        return None;
+    }
+    // The crossing of the level halfway between the background and the
+    // level one window further in: the edge's middle.
+    let level = means[edge.saturating_sub(n)];
+    let half_way = 0.5 * (level + background);
+    let crossing = (0..=edge)
+        .rev()
+        .find(|&i| (means[i] - background).abs() >= (half_way - background).abs())
+        .unwrap_or(edge);
+    Some(start + (crossing as f64 + 0.5 * lag as f64) * STEP_PX)
 }
 
 #[cfg(test)]
@@ -219,6 +366,24 @@ mod tests {
         })
     }
 
+    /// The drogue of [`render`] under haze: the airlight lifts the rim's
+    /// band above a darker sky, so the band darkens outward to the sky.
+    fn render_hazy() -> GrayImage {
+        GrayImage::from_fn(640, 480, |x, y| {
+            let r = (f64::from(x) - 320.0).hypot(f64::from(y) - 240.0) * 2.0 / 800.0;
+            let g = if r < 0.15 {
+                120
+            } else if r < 0.30 {
+                175
+            } else if r < 0.33 {
+                150
+            } else {
+                135
+            };
+            Luma([g])
+        })
+    }
+
     const DROGUE: DrogueCircles = DrogueCircles {
         inner_radius_m: 0.15,
         canopy_radius_m: 0.33,
@@ -227,6 +392,7 @@ mod tests {
     const EDGE: RimEdge = RimEdge {
         min_step_gray: 20.0,
         widths: &[(0.0, 2.0)],
+        mids: &[(0.0, 90.0)],
     };
 
     fn disc() -> Ellipse {
@@ -251,6 +417,34 @@ mod tests {
             &mut profile,
         );
         assert!(s.is_some_and(|s| s > 0.9), "{s:?}");
+    }
+
+    #[test]
+    fn a_hazy_drogue_whose_band_is_lighter_than_the_sky_shows_its_rim() {
+        let mut profile = Vec::new();
+        let cam = camera();
+        // As the detector asks: a tenth of the disc's rim step (55), at
+        // least half of `min_contrast_gray` (12).
+        let edge = RimEdge {
+            min_step_gray: 6.0,
+            widths: &[(0.0, 2.0)],
+            mids: &[(0.0, 147.0)],
+        };
+        let s = ring_support(&render_hazy(), &cam, &disc(), DROGUE, edge, &mut profile);
+        assert!(s.is_some_and(|s| s > 0.9), "{s:?}");
+        // Without the disc's mid level the canopy cannot be told from a
+        // dark shape beside the disc: only the brightening test is left,
+        // and it sees nothing here.
+        let blind = RimEdge { mids: &[], ..edge };
+        let s = ring_support(&render_hazy(), &cam, &disc(), DROGUE, blind, &mut profile);
+        assert!(s.is_some_and(|s| s < 0.1), "{s:?}");
+        // An ellipse inside the disc predicts a rim inside the canopy:
+        // the canopy-to-band edge there is not the drogue's outer edge.
+        for a in [35.0, 54.0] {
+            let inner = Ellipse { a, b: a, ..disc() };
+            let s = ring_support(&render_hazy(), &cam, &inner, DROGUE, edge, &mut profile);
+            assert!(s.is_some_and(|s| s < 0.1), "{a}: {s:?}");
+        }
     }
 
     #[test]

@@ -120,11 +120,19 @@ impl EdgeVoter {
     fn vote(&mut self, w: usize, h: usize, r_min: usize, r_max: usize) {
         self.votes.clear();
         self.votes.resize(w * h, 0);
+        // Rounding half away from zero, as `f32::round`, without its libm
+        // call (a third of the voting's cost): below -0.5 a coordinate is
+        // outside the frame anyway.
+        let round = |v: f32| (v > -0.5).then_some((v + 0.5) as i64);
         for &([x, y], [gx, gy]) in &self.edges {
             for r in r_min..=r_max {
-                let cx = (x as f32 - gx * r as f32).round() as i64;
-                let cy = (y as f32 - gy * r as f32).round() as i64;
-                if cx < 0 || cy < 0 || cx >= w as i64 || cy >= h as i64 {
+                let (Some(cx), Some(cy)) = (
+                    round(x as f32 - gx * r as f32),
+                    round(y as f32 - gy * r as f32),
+                ) else {
+                    break;
+                };
+                if cx >= w as i64 || cy >= h as i64 {
                     break;
                 }
                 let v = &mut self.votes[cy as usize * w + cx as usize];
@@ -166,18 +174,25 @@ impl EdgeVoter {
                 found.push((x, y, s));
             }
         }
-        found.sort_by_key(|p| std::cmp::Reverse(p.2));
+        // Greedy: the strongest (the first in raster order among equals)
+        // not near a kept one, until `max_peaks`. A scan per peak, not a
+        // sort of every voted pixel: `max_peaks` is a handful.
+        let near = |k: &(usize, usize, u32), p: &(usize, usize, u32)| {
+            (k.0 as i64 - p.0 as i64).abs() <= PEAK_SEPARATION
+                && (k.1 as i64 - p.1 as i64).abs() <= PEAK_SEPARATION
+        };
         let mut kept: Vec<(usize, usize, u32)> = Vec::with_capacity(max_peaks);
-        for p in found {
-            let near = kept.iter().any(|k| {
-                (k.0 as i64 - p.0 as i64).abs() <= PEAK_SEPARATION
-                    && (k.1 as i64 - p.1 as i64).abs() <= PEAK_SEPARATION
-            });
-            if !near {
-                kept.push(p);
-                if kept.len() == max_peaks {
-                    break;
-                }
+        while kept.len() < max_peaks {
+            let best = found
+                .iter()
+                .filter(|p| !kept.iter().any(|k| near(k, p)))
+                .fold(None, |best: Option<&(usize, usize, u32)>, p| match best {
+                    Some(b) if b.2 >= p.2 => Some(b),
+                    _ => Some(p),
+                });
+            match best {
+                Some(&p) => kept.push(p),
+                None => break,
             }
         }
         kept

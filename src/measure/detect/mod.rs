@@ -239,6 +239,9 @@ struct RimPass {
     fill: f64,
     /// Distance from the ellipse counted as on the rim, pixels.
     tolerance: f64,
+    /// The rim's mid level by direction (angle about the ellipse's centre,
+    /// gray level), for the canopy test.
+    mids: Vec<(f64, f32)>,
 }
 
 /// A verified candidate.
@@ -313,6 +316,30 @@ pub struct Detector {
     /// [`rim::smoothing_spread_px`] for each half-width up to
     /// [`MAX_SMOOTH_HALF`].
     smoothing_spread_px: Vec<f64>,
+}
+
+/// Whether the light side of step `e` (from its crossing to a few samples
+/// past its light end) on profile `p` (sampled from `s_min` every `step`)
+/// reaches saturation.
+fn glare_on_light_side(p: &[f32], s_min: f64, step: f64, e: &rim::RayEdge) -> bool {
+    let Some(last) = p.len().checked_sub(1) else {
+        return false;
+    };
+    let index = |s: f64| (((s - s_min) / step).max(0.0) as usize).min(last);
+    let (from, to) = (index(e.s), (index(e.light_s) + 2).min(last));
+    p[from..=to].iter().any(|&v| v >= SATURATED_GRAY)
+}
+
+/// The angle between directions `a` and `b` (radians, each within a turn
+/// or two of zero, as `atan2` and ray angles are), 0..=pi: without the
+/// `fmod` of `rem_euclid`, which showed in profiles of the canopy and fill
+/// tests (a nearest-angle lookup per sample).
+fn angle_gap(a: f64, b: f64) -> f64 {
+    let mut d = (a - b).abs();
+    while d > TAU {
+        d -= TAU;
+    }
+    d.min(TAU - d)
 }
 
 /// Radius of an ellipse (centred at the origin) in direction `phi`.
@@ -841,6 +868,16 @@ impl Detector {
                     rim::smooth(&mut self.profile, half, &mut self.scratch);
                 }
                 if let Some(mut e) = rim::strongest_rise(&self.profile, s0, 0.5, min_contrast) {
+                    // A step into saturated pixels is most likely the skirt
+                    // of a glare streak lying over the disc: its width says
+                    // nothing of blur. (Its point stays: the robust fit
+                    // drops it when it is off the rim.)
+                    let raw = if half > 0 {
+                        &self.raw_profile
+                    } else {
+                        &self.profile
+                    };
+                    let glare = glare_on_light_side(raw, s0, 0.5, &e);
                     if half > 0 {
                         let mid = 0.5 * (e.dark + e.light);
                         let reach = 0.5 * self.smoothing_spread_px[half] + 1.0;
@@ -858,7 +895,7 @@ impl Detector {
                     // The smoothing's own spread is not the step's.
                     let spread = self.smoothing_spread_px[half];
                     widths.push((2.0 * (e.light_s - e.s) - spread).max(0.0));
-                    clipped += usize::from(e.clipped);
+                    clipped += usize::from(e.clipped && !glare);
                 }
             }
             tracing::trace!(
@@ -942,6 +979,7 @@ impl Detector {
             shape,
             fill,
             tolerance: tol,
+            mids,
         })
     }
 
@@ -960,10 +998,7 @@ impl Detector {
         for k in 0..FILL_DIRECTIONS {
             let phi = TAU * (k as f64 + 0.5) / FILL_DIRECTIONS as f64;
             let r = polar_radius(ellipse.a, ellipse.b, ellipse.theta, phi);
-            let gap = |a: f64| {
-                let d = (a - phi).rem_euclid(TAU);
-                d.min(TAU - d)
-            };
+            let gap = |a: f64| angle_gap(a, phi);
             let Some(&(_, mid)) = mids.iter().min_by(|x, y| gap(x.0).total_cmp(&gap(y.0))) else {
                 continue;
             };
@@ -1006,6 +1041,7 @@ impl Detector {
             shape,
             fill,
             tolerance: tol,
+            mids,
         } = pass;
         // Canopy evidence: its outer rim where the candidate's pose puts it.
         let widths: Vec<(f64, f64)> = inliers
@@ -1033,6 +1069,7 @@ impl Detector {
         let edge = canopy::RimEdge {
             min_step_gray: (0.1 * rim_contrast).max(0.5 * self.cfg.min_contrast_gray) as f32,
             widths: &widths,
+            mids: &mids,
         };
         let canopy = canopy::ring_support(
             image,

@@ -502,3 +502,34 @@ fn the_canopy_taken_for_the_disc_gives_way_to_the_disc_inside() {
     let kept = detector.prefer_inner_disc(&img, disc, 0).ellipse;
     assert!((kept.a - truth.a).abs() < 1.0, "{kept:?}");
 }
+
+/// A step whose light side reaches saturation is a glare streak's skirt
+/// (its width is not blur); a step to an unsaturated level is not.
+#[test]
+fn a_step_into_saturation_is_glare() {
+    let ramp = |top: f32| -> Vec<f32> {
+        (0..40)
+            .map(|k| (30.0 + 10.0 * (k as f32 - 10.0).max(0.0)).min(top))
+            .collect()
+    };
+    let glare = ramp(255.0);
+    let e = super::rim::strongest_rise(&glare, 0.0, 0.5, 12.0).expect("a step");
+    assert!(super::glare_on_light_side(&glare, 0.0, 0.5, &e));
+    let canopy = ramp(180.0);
+    let e = super::rim::strongest_rise(&canopy, 0.0, 0.5, 12.0).expect("a step");
+    assert!(!super::glare_on_light_side(&canopy, 0.0, 0.5, &e));
+}
+
+/// The angle between two directions, as `rem_euclid` gives it.
+#[test]
+fn angle_gap_matches_rem_euclid() {
+    use std::f64::consts::TAU;
+    let mut rng = ChaCha8Rng::seed_from_u64(5);
+    for _ in 0..10_000 {
+        let a: f64 = rng.random_range(-4.0..7.0);
+        let b: f64 = rng.random_range(-4.0..7.0);
+        let d = (a - b).rem_euclid(TAU);
+        let expected = d.min(TAU - d);
+        assert!((super::angle_gap(a, b) - expected).abs() < 1e-12, "{a} {b}");
+    }
+}
