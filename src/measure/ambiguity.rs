@@ -483,11 +483,11 @@ mod tests {
         let cam = camera();
         let n = nalgebra::Rotation3::new(Vector3::new(0.0, 0.6, 0.2)) * -Vector3::z();
         let truth = CirclePose {
-            centre_camera_m: Vector3::new(0.1, -0.05, 3.0),
-            normal_camera: n.normalize(),
+            centre_camera_m: Point::new(Vector3::new(0.1, -0.05, 3.0)),
+            normal_camera: Direction::new(n.normalize()),
         };
         let mirrored = CirclePose {
-            normal_camera: Vector3::new(-n.x, -n.y, n.z).normalize(),
+            normal_camera: Direction::new(Vector3::new(-n.x, -n.y, n.z).normalize()),
             ..truth
         };
         let image = render_levels(&cam, &truth, [110, 180, 150, 130]);
