@@ -56,12 +56,12 @@ fn bench(c: &mut Criterion) {
     let mut detector = testing::detector(&config, &camera);
     for (name, image) in frames() {
         c.bench_function(&format!("detect full {name}"), |b| {
-            b.iter(|| black_box(detector.detect(black_box(&image), None)))
+            b.iter(|| black_box(detector.detect(black_box(&image), None)));
         });
         if let Some(found) = detector.detect(&image, None) {
             let hint: Ellipse = found.ellipse_px;
             c.bench_function(&format!("detect tracked {name}"), |b| {
-                b.iter(|| black_box(detector.detect(black_box(&image), Some(&hint))))
+                b.iter(|| black_box(detector.detect(black_box(&image), Some(&hint))));
             });
         }
     }
@@ -134,7 +134,7 @@ fn reference_sets(c: &mut Criterion) {
                 for image in &images {
                     black_box(detector.detect(black_box(image), None));
                 }
-            })
+            });
         });
     }
     all.sort_by(f64::total_cmp);

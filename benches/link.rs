@@ -42,7 +42,7 @@ fn bench_encode_send(c: &mut Criterion) {
             let pose = DroguePose::new(black_box(&det)).unwrap();
             let msg = messages::landing_target_body(&m, &pose, &det);
             black_box(enc.encode(&msg, None));
-        })
+        });
     });
     c.bench_function("link/landing_target build+encode+udp send+event", |b| {
         b.iter(|| {
@@ -51,7 +51,7 @@ fn bench_encode_send(c: &mut Criterion) {
             let raw = enc.encode(&msg, None);
             socket.send_to(raw.raw_bytes(), to).unwrap();
             black_box(messages::fields_json(&msg));
-        })
+        });
     });
     c.bench_function(
         "link/landing_target signed build+encode+udp send+event",
@@ -62,7 +62,7 @@ fn bench_encode_send(c: &mut Criterion) {
                 let raw = enc.encode(&msg, Some(&signing));
                 socket.send_to(raw.raw_bytes(), to).unwrap();
                 black_box(messages::fields_json(&msg));
-            })
+            });
         },
     );
     c.bench_function(
@@ -78,7 +78,7 @@ fn bench_encode_send(c: &mut Criterion) {
                     let raw = enc.encode(&msg, None);
                     socket.send_to(raw.raw_bytes(), to).unwrap();
                 }
-            })
+            });
         },
     );
 }
@@ -127,7 +127,7 @@ fn bench_submit_to_wire(c: &mut Criterion) {
                 total += t0.elapsed();
             }
             total
-        })
+        });
     });
     link.shutdown();
 }

@@ -174,7 +174,7 @@ fn bench(c: &mut Criterion) {
                 (0..iters)
                     .map(|_| log_batch(&cfg, dir.path(), Box::new(Discard), &inputs))
                     .sum()
-            })
+            });
         });
         group.bench_function(format!("{name}_to_disk"), |b| {
             b.iter_custom(|iters| {
@@ -182,7 +182,7 @@ fn bench(c: &mut Criterion) {
                 (0..iters)
                     .map(|_| log_batch(&cfg, dir.path(), Box::new(FileStorage), &inputs))
                     .sum()
-            })
+            });
         });
     }
     group.finish();
@@ -220,7 +220,7 @@ fn frame_encoding(c: &mut Criterion) {
     group.throughput(Throughput::Elements(1));
     group.bench_function("raw_copy", |b| b.iter(|| black_box(raw.clone())));
     group.bench_function("log_png", |b| {
-        b.iter(|| enc.encode(black_box(&raw), w, h, &mut out).unwrap())
+        b.iter(|| enc.encode(black_box(&raw), w, h, &mut out).unwrap());
     });
     group.bench_function("png_crate_fast_avg", |b| {
         b.iter(|| {
@@ -229,7 +229,7 @@ fn frame_encoding(c: &mut Criterion) {
                 .write_image(black_box(&raw), w, h, image::ExtendedColorType::L8)
                 .unwrap();
             v
-        })
+        });
     });
     let mut jpeg = Vec::new();
     drogue_vision::log::topics::jpeg(&raw, w, h, 90, &mut jpeg).unwrap();
@@ -245,7 +245,7 @@ fn frame_encoding(c: &mut Criterion) {
         raw.len() as f64 / image_jpeg.len() as f64
     );
     group.bench_function("log_jpeg_q90", |b| {
-        b.iter(|| drogue_vision::log::topics::jpeg(black_box(&raw), w, h, 90, &mut jpeg).unwrap())
+        b.iter(|| drogue_vision::log::topics::jpeg(black_box(&raw), w, h, 90, &mut jpeg).unwrap());
     });
     group.bench_function("image_crate_jpeg_q90", |b| {
         b.iter(|| {
@@ -254,7 +254,7 @@ fn frame_encoding(c: &mut Criterion) {
                 .encode(black_box(&raw), w, h, image::ExtendedColorType::L8)
                 .unwrap();
             v
-        })
+        });
     });
     group.finish();
 }

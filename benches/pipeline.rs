@@ -90,7 +90,7 @@ fn bench(c: &mut Criterion) {
                 b.iter(|| {
                     measurer.forget_track();
                     black_box(measurer.measure(black_box(frame)))
-                })
+                });
             });
             measurer.forget_track();
             for previous in track {
@@ -98,11 +98,11 @@ fn bench(c: &mut Criterion) {
             }
             let primed = measurer.clone();
             c.bench_function(&format!("measure tracked {name}"), |b| {
-                b.iter_custom(|iters| time_tracked(&primed, frame, iters, None))
+                b.iter_custom(|iters| time_tracked(&primed, frame, iters, None));
             });
             let mut other = vec![0u8; 32 << 20];
             c.bench_function(&format!("measure tracked cold-cache {name}"), |b| {
-                b.iter_custom(|iters| time_tracked(&primed, frame, iters, Some(&mut other)))
+                b.iter_custom(|iters| time_tracked(&primed, frame, iters, Some(&mut other)));
             });
         }
     }

@@ -58,7 +58,7 @@ fn bench(c: &mut Criterion) {
     };
     let solutions = cone_pose(&ellipse, &cam, 0.15).unwrap();
     c.bench_function("cone_pose", |b| {
-        b.iter(|| cone_pose(black_box(&ellipse), &cam, 0.15))
+        b.iter(|| cone_pose(black_box(&ellipse), &cam, 0.15));
     });
     c.bench_function("pose_uncertainty_600_points", |b| {
         b.iter(|| {
@@ -70,10 +70,10 @@ fn bench(c: &mut Criterion) {
                 &quality,
                 &points,
             )
-        })
+        });
     });
     c.bench_function("canopy_support", |b| {
-        b.iter(|| canopy_support(&image, &cam, black_box(&solutions[0]), 0.33))
+        b.iter(|| canopy_support(&image, &cam, black_box(&solutions[0]), 0.33));
     });
     c.bench_function("pose_stage_per_frame", |b| {
         let mut tracker = Tracker::new(&config.track).unwrap();
@@ -84,7 +84,7 @@ fn bench(c: &mut Criterion) {
             t_ns += 33_000_000;
             let choice = tracker.choose([s0, s1], supports, t_ns, &ellipse);
             pose_uncertainty(&ellipse, &cam, &choice.pose, 0.15, &quality, &points)
-        })
+        });
     });
 }
 

@@ -31,13 +31,13 @@ fn bench(c: &mut Criterion) {
     };
     let mut g = c.benchmark_group(format!("v4l_convert_{w}x{h}"));
     g.bench_function("GREY", |b| {
-        b.iter(|| to_gray(&layout(PixelFormat::Grey), black_box(&grey_buf)).unwrap())
+        b.iter(|| to_gray(&layout(PixelFormat::Grey), black_box(&grey_buf)).unwrap());
     });
     g.bench_function("YUYV", |b| {
-        b.iter(|| to_gray(&layout(PixelFormat::Yuyv), black_box(&yuyv_buf)).unwrap())
+        b.iter(|| to_gray(&layout(PixelFormat::Yuyv), black_box(&yuyv_buf)).unwrap());
     });
     g.bench_function(format!("MJPG_{}KiB", jpeg.len() / 1024), |b| {
-        b.iter(|| to_gray(&layout(PixelFormat::Mjpeg), black_box(&jpeg)).unwrap())
+        b.iter(|| to_gray(&layout(PixelFormat::Mjpeg), black_box(&jpeg)).unwrap());
     });
     g.finish();
 }

@@ -82,7 +82,7 @@ fn main() {
                     .parse()
                     .ok()
                     .filter(|s: &f64| *s >= 1.0)
-                    .unwrap_or_else(|| usage("--scale: a number >= 1"))
+                    .unwrap_or_else(|| usage("--scale: a number >= 1"));
             }
             "--only" => only = Some(value("--only")),
             "--against-truth" => against_truth = true,

@@ -110,7 +110,7 @@ fn main() {
                 frames = args
                     .next()
                     .and_then(|v| v.parse().ok())
-                    .expect("--frames N")
+                    .expect("--frames N");
             }
             "--only" => only = args.next(),
             "--reference" => reference = args.next().map(Into::into),

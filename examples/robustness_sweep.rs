@@ -43,12 +43,12 @@ fn main() {
                     .parse()
                     .ok()
                     .filter(|n| *n > 0)
-                    .unwrap_or_else(|| usage("--frames: a whole number > 0"))
+                    .unwrap_or_else(|| usage("--frames: a whole number > 0"));
             }
             "--seed" => {
                 seed = value("--seed")
                     .parse()
-                    .unwrap_or_else(|_| usage("--seed: a whole number"))
+                    .unwrap_or_else(|_| usage("--seed: a whole number"));
             }
             "--only" => only = Some(value("--only")),
             "--dump" => dump = Some(value("--dump").into()),

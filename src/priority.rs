@@ -63,7 +63,7 @@ pub fn make_this_thread_realtime(priority: u8) -> Result<(), RealtimeError> {
         };
         // SAFETY: `param` is a valid sched_param that outlives the call;
         // pid 0 is the calling thread.
-        let r = unsafe { libc::sched_setscheduler(0, libc::SCHED_FIFO, &param) };
+        let r = unsafe { libc::sched_setscheduler(0, libc::SCHED_FIFO, &raw const param) };
         if r != 0 {
             return Err(RealtimeError::Refused {
                 priority,

@@ -11,7 +11,7 @@
 
 use nalgebra::{Quaternion, UnitQuaternion, Vector3};
 use std::marker::PhantomData;
-use std::ops::Deref;
+use std::ops::{Add, Deref, Sub};
 
 /// The camera frame (OpenCV optical axes), metres.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -56,6 +56,23 @@ impl<F> Deref for Point<F> {
     type Target = Vector3<f64>;
     fn deref(&self) -> &Vector3<f64> {
         &self.metres
+    }
+}
+
+/// A point moved by an offset in its own frame is a point of that frame.
+impl<F> Add<Vector3<f64>> for Point<F> {
+    type Output = Point<F>;
+    fn add(self, offset: Vector3<f64>) -> Point<F> {
+        Point::new(self.metres + offset)
+    }
+}
+
+/// The offset between two points of one frame (points of two frames do
+/// not subtract).
+impl<F> Sub for Point<F> {
+    type Output = Vector3<f64>;
+    fn sub(self, other: Point<F>) -> Vector3<f64> {
+        self.metres - other.metres
     }
 }
 

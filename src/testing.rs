@@ -61,11 +61,10 @@ pub const DROGUE_REFERENCE_SETS: [&str; 8] = [
 /// # Panics
 /// When the variable is unset or its folder has no `paper10/` set.
 pub fn reference_dir() -> PathBuf {
-    let dir = std::env::var_os(REFERENCE_DIR_VAR)
-        .map(PathBuf::from)
-        .unwrap_or_else(|| {
-            panic!("{REFERENCE_DIR_VAR} is not set: it must name the reference frames' folder")
-        });
+    let dir = std::env::var_os(REFERENCE_DIR_VAR).map_or_else(
+        || panic!("{REFERENCE_DIR_VAR} is not set: it must name the reference frames' folder"),
+        PathBuf::from,
+    );
     assert!(
         dir.join("paper10").is_dir(),
         "{REFERENCE_DIR_VAR}={} is not the reference frames' folder (no paper10/ in it)",
@@ -277,8 +276,8 @@ pub fn detection(
             theta: 0.0,
         },
         pose_camera: CirclePose {
-            centre_camera_m: Vector3::new(p.y, p.z, p.x),
-            normal_camera: Vector3::new(n.y, n.z, n.x),
+            centre_camera_m: Point::new(Vector3::new(p.y, p.z, p.x)),
+            normal_camera: Direction::new(Vector3::new(n.y, n.z, n.x)),
         },
         alt_pose_camera: None,
         disambiguation: Disambiguation::CanopyRim,

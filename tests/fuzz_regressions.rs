@@ -34,7 +34,8 @@ fn mcap_a_record_running_past_its_chunk_is_an_error() {
 }
 
 fn a_record_running_past_its_chunk(input: &Path) {
-    use drogue_vision::log::{recover, replay};
+    use drogue_vision::log::recover;
+    use drogue_vision::source::replay;
     let items: Vec<_> = replay::open(input).unwrap().collect();
     let last = items.last().expect("an error at least");
     let Err(e) = last else {
@@ -88,7 +89,8 @@ fn image_a_rim_range_too_long_to_count_is_measured() {
 /// such a record as unreadable and copies the rest.
 #[test]
 fn mcap_an_attachment_without_room_for_its_crc() {
-    use drogue_vision::log::{recover, replay};
+    use drogue_vision::log::recover;
+    use drogue_vision::source::replay;
     let input = seed("mcap_reader", "attachment_without_crc.mcap");
     let frames: Vec<_> = replay::open(&input).unwrap().collect();
     let _ = replay::ReplayReader::first_camera(&input);
@@ -97,7 +99,7 @@ fn mcap_an_attachment_without_room_for_its_crc() {
     match recover::recover(&input, &out) {
         Ok(report) => {
             assert!(report.unreadable_records >= 1, "{report}");
-            let copied = replay::open(&out).unwrap().filter(|f| f.is_ok()).count();
+            let copied = replay::open(&out).unwrap().flatten().count();
             let read = frames.iter().filter(|f| f.is_ok()).count();
             assert!(copied >= read, "{copied} frames copied, {read} read");
         }

@@ -41,7 +41,7 @@ fn run(args: &[&str], cwd: &Path, limit: Duration) -> Outcome {
     let mut usage: libc::rusage = unsafe { std::mem::zeroed() };
     loop {
         // SAFETY: pid is our own child, the pointers are to live locals.
-        let r = unsafe { libc::wait4(pid, &mut status, libc::WNOHANG, &mut usage) };
+        let r = unsafe { libc::wait4(pid, &raw mut status, libc::WNOHANG, &raw mut usage) };
         if r == pid {
             break;
         }
@@ -50,7 +50,7 @@ fn run(args: &[&str], cwd: &Path, limit: Duration) -> Outcome {
             // SAFETY: signalling our own child.
             unsafe { libc::kill(pid, libc::SIGKILL) };
             // SAFETY: as above; reaps it.
-            unsafe { libc::wait4(pid, &mut status, 0, &mut usage) };
+            unsafe { libc::wait4(pid, &raw mut status, 0, &raw mut usage) };
             panic!("{args:?} still running after {limit:?}");
         }
         std::thread::sleep(Duration::from_millis(20));
@@ -433,7 +433,8 @@ fn log_with_a_big_record(path: &Path, big: usize) -> u64 {
 /// log without it (far less than the record).
 #[test]
 fn an_oversized_mcap_record_is_skipped_and_counted() {
-    use drogue_vision::log::{recover, replay};
+    use drogue_vision::log::recover;
+    use drogue_vision::source::replay;
     const BIG: usize = 48 << 20;
     const { assert!(BIG > drogue_vision::log::oversized::RECORD_LIMIT_BYTES) };
     let dir = tempfile::tempdir().unwrap();
@@ -547,7 +548,7 @@ fn random_configs_through_the_binary_exit_0_or_2() {
             SHORT,
         );
         assert!(
-            matches!(o.code, Some(0) | Some(2)),
+            matches!(o.code, Some(0 | 2)),
             "{text}: exit {:?}: {}",
             o.code,
             o.stderr

@@ -128,8 +128,9 @@ fn udp_every_pose_message_matches_the_measurement() {
 
     // The vehicle pose the link heard, at the capture time; none far from it.
     let v = link.vehicle_pose_at(capture).expect("vehicle pose");
-    assert_eq!(v.position_ned_m, [100.0, 20.0, -50.0]);
-    assert!(close(v.q_ned_body[0], h, 1e-6) && close(v.q_ned_body[3], h, 1e-6));
+    assert_eq!(v.position_ned_m.to_array(), [100.0, 20.0, -50.0]);
+    let q = drogue_vision::spatial::quaternion_to_wxyz(&v.q_ned_body);
+    assert!(close(q[0], h, 1e-6) && close(q[3], h, 1e-6));
     assert!(link.vehicle_pose_at(capture + 10_000_000_000).is_none());
 
     // Every message is also an event for the log.

@@ -13,7 +13,8 @@
 mod log_support;
 
 use drogue_vision::log::recover::{self, RECOVER_METADATA};
-use drogue_vision::log::{ChunkCompression, FlightLog, LogConfig, LogError, metadata, replay};
+use drogue_vision::log::{ChunkCompression, FlightLog, LogConfig, LogError, metadata, reader};
+use drogue_vision::source::replay;
 use log_support as s;
 use rand::{Rng, SeedableRng};
 use std::path::{Path, PathBuf};
@@ -48,7 +49,7 @@ fn config(compression: ChunkCompression) -> LogConfig {
 /// reader reads, and whether it stopped on an error.
 fn read_all(path: &Path) -> (Vec<(String, u32, u64)>, bool) {
     let mut out = Vec::new();
-    for m in recover::message_reader(path).unwrap() {
+    for m in reader::message_reader(path).unwrap() {
         match m {
             Ok(m) => out.push((m.channel.topic.clone(), m.sequence, m.log_time)),
             Err(_) => return (out, true),
@@ -130,7 +131,7 @@ fn a_zstd_log_cut_at_20_random_offsets_keeps_every_complete_chunk() {
             n,
         ));
     }
-    chunks.sort();
+    chunks.sort_unstable();
     let data_end = chunks.last().unwrap().1;
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(14);
     for _ in 0..20 {
@@ -156,7 +157,7 @@ fn a_zstd_log_cut_at_20_random_offsets_keeps_every_complete_chunk() {
         );
         // What it recovered is exactly the start of the original, in order.
         assert_eq!(got[..], all[..got.len()], "cut at {cut}");
-        assert!(recover::is_complete(&out).unwrap());
+        assert!(reader::is_complete(&out).unwrap());
     }
 }
 

@@ -9,7 +9,7 @@
 
 mod log_support;
 
-use drogue_vision::log::{FlightLog, recover};
+use drogue_vision::log::{FlightLog, reader, recover};
 use log_support as s;
 use std::io::{BufRead, BufReader, Write};
 use std::path::{Path, PathBuf};
@@ -58,7 +58,7 @@ fn readable_frames(path: &Path) -> (Vec<u64>, u64, bool) {
     let mut seqs = Vec::new();
     let mut messages = 0;
     let mut cut = false;
-    for m in recover::message_reader(path).unwrap() {
+    for m in reader::message_reader(path).unwrap() {
         match m {
             Ok(m) => {
                 messages += 1;
@@ -110,7 +110,7 @@ fn sigkill_loses_at_most_a_second_and_recovery_indexes_the_rest() {
         .collect();
     assert_eq!(files.len(), 1, "{files:?}");
     let cut_file = files[0].clone();
-    assert!(!recover::is_complete(&cut_file).unwrap());
+    assert!(!reader::is_complete(&cut_file).unwrap());
 
     let (seqs, messages, cut) = readable_frames(&cut_file);
     assert!(cut, "a killed writer leaves no end magic");
@@ -138,7 +138,7 @@ fn sigkill_loses_at_most_a_second_and_recovery_indexes_the_rest() {
     let report = recover::recover(&cut_file, &fixed).unwrap();
     assert!(report.cut.is_some());
     assert_eq!(report.messages, messages);
-    assert!(recover::is_complete(&fixed).unwrap());
+    assert!(reader::is_complete(&fixed).unwrap());
     let bytes = std::fs::read(&fixed).unwrap();
     let summary = mcap::Summary::read(&bytes).unwrap().unwrap();
     assert_eq!(summary.stats.unwrap().message_count, messages);
@@ -156,7 +156,7 @@ fn sigkill_loses_at_most_a_second_and_recovery_indexes_the_rest() {
     let log = FlightLog::start(&s::config(), dir.path(), &s::camera()).unwrap();
     let summary = log.finish().unwrap();
     assert_eq!(summary.recovered, vec![cut_file.clone()]);
-    assert!(recover::is_complete(&cut_file).unwrap());
+    assert!(reader::is_complete(&cut_file).unwrap());
     let (seqs_after, _, cut_after) = readable_frames(&cut_file);
     assert!(!cut_after);
     assert_eq!(seqs_after, seqs);

@@ -5,7 +5,8 @@
 
 mod log_support;
 
-use drogue_vision::log::{recover, replay};
+use drogue_vision::log::{reader, recover};
+use drogue_vision::source::replay;
 use log_support as s;
 use std::sync::atomic::Ordering;
 use std::sync::{Arc, Mutex};
@@ -87,7 +88,7 @@ fn a_full_disk_is_reported_the_caller_carries_on_and_the_file_stays_readable() {
 
     // The second part is complete: the frames after the disk had room, and
     // the write error in /log.
-    assert!(recover::is_complete(&summary.files[1]).unwrap());
+    assert!(reader::is_complete(&summary.files[1]).unwrap());
     let second: Vec<u64> = replay::open(&summary.files[1])
         .unwrap()
         .map(|f| f.unwrap().seq)

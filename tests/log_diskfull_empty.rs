@@ -6,7 +6,8 @@
 
 mod log_support;
 
-use drogue_vision::log::{recover, replay};
+use drogue_vision::log::reader;
+use drogue_vision::source::replay;
 use log_support as s;
 use std::sync::Arc;
 use std::sync::atomic::Ordering;
@@ -47,7 +48,7 @@ fn retries_on_a_full_disk_leave_no_empty_files() {
     assert_eq!(on_disk, summary.files, "{on_disk:?}");
     assert_eq!(on_disk.len(), 2, "{on_disk:?}");
     assert!(on_disk[1].to_string_lossy().ends_with("_001.mcap"));
-    assert!(recover::is_complete(&on_disk[1]).unwrap());
+    assert!(reader::is_complete(&on_disk[1]).unwrap());
     let resumed: Vec<u64> = replay::open(&on_disk[1])
         .unwrap()
         .map(|f| f.unwrap().seq)

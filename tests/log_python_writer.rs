@@ -6,7 +6,7 @@
 //! detections of the PNG folder, review reads it whole (not cut short, not
 //! damaged), and recover copies every message.
 
-use drogue_vision::log::recover;
+use drogue_vision::log::{reader, recover};
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
@@ -55,7 +55,7 @@ fn a_python_written_zstd_log_is_replayed_processed_reviewed_and_recovered() {
     );
 
     // Replay: every frame, pixel for pixel the PNG written beside it.
-    let frames: Vec<_> = drogue_vision::log::replay::open(&log)
+    let frames: Vec<_> = drogue_vision::source::replay::open(&log)
         .unwrap()
         .map(|f| f.unwrap())
         .collect();
@@ -91,9 +91,6 @@ fn a_python_written_zstd_log_is_replayed_processed_reviewed_and_recovered() {
         (n, None, 0),
         "{rep}"
     );
-    let copied = recover::message_reader(&out)
-        .unwrap()
-        .filter(|m| m.is_ok())
-        .count();
+    let copied = reader::message_reader(&out).unwrap().flatten().count();
     assert_eq!(copied as u64, n);
 }

@@ -3,7 +3,8 @@
 
 mod log_support;
 
-use drogue_vision::log::{FlightLog, ImageEncoding, LogConfig, replay};
+use drogue_vision::log::{FlightLog, ImageEncoding, LogConfig};
+use drogue_vision::source::replay;
 use foxglove::Decode;
 use foxglove::messages::{
     CameraCalibration, CompressedImage, FrameTransforms, ImageAnnotations, Log, PoseInFrame,
@@ -161,17 +162,14 @@ fn check_all_messages(cfg: &LogConfig) {
                 let pose = p.pose.unwrap();
                 let pos = pose.position.unwrap();
                 let want = s::measurement(seq).detection.unwrap().pose_camera;
-                assert_eq!(
-                    [pos.x, pos.y, pos.z],
-                    <[f64; 3]>::from(want.centre_camera_m)
-                );
+                assert_eq!([pos.x, pos.y, pos.z], want.centre_camera_m.to_array());
                 // The drogue's z axis (the normal) from the quaternion.
                 let q = pose.orientation.unwrap();
                 let uq = nalgebra::UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(
                     q.w, q.x, q.y, q.z,
                 ));
                 let z = uq * nalgebra::Vector3::z();
-                assert!((z - want.normal_camera).norm() < 1e-12);
+                assert!((z - *want.normal_camera).norm() < 1e-12);
             }
             "/tf" => {
                 assert_eq!(schema.name, "foxglove.FrameTransforms");
@@ -258,7 +256,7 @@ fn rotation_by_size_splits_into_numbered_complete_files_losing_nothing() {
             f.to_string_lossy().ends_with(&format!("_{i:03}.mcap")),
             "{f:?}"
         );
-        assert!(drogue_vision::log::recover::is_complete(f).unwrap());
+        assert!(drogue_vision::log::reader::is_complete(f).unwrap());
         for frame in replay::open(f).unwrap() {
             seqs.push(frame.unwrap().seq);
         }
@@ -293,7 +291,7 @@ fn rotation_by_duration_starts_a_new_numbered_file() {
     let summary = log.finish().unwrap();
     assert_eq!(summary.files.len(), 2, "{:?}", summary.files);
     for (i, f) in summary.files.iter().enumerate() {
-        assert!(drogue_vision::log::recover::is_complete(f).unwrap());
+        assert!(drogue_vision::log::reader::is_complete(f).unwrap());
         let seqs: Vec<u64> = replay::open(f).unwrap().map(|r| r.unwrap().seq).collect();
         assert_eq!(seqs, vec![i as u64]);
     }

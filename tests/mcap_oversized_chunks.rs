@@ -233,7 +233,7 @@ fn run(args: &[&str], cwd: &Path) -> (Option<i32>, String, String, i64) {
     // SAFETY: a zeroed rusage is a valid value for wait4 to fill.
     let mut usage: libc::rusage = unsafe { std::mem::zeroed() };
     // SAFETY: pid is our own child, the pointers are to live locals; reaps it.
-    let r = unsafe { libc::wait4(pid, &mut status, 0, &mut usage) };
+    let r = unsafe { libc::wait4(pid, &raw mut status, 0, &raw mut usage) };
     assert_eq!(r, pid, "wait4");
     let code = libc::WIFEXITED(status).then(|| libc::WEXITSTATUS(status));
     (
@@ -254,7 +254,7 @@ fn log_in(dir: &Path) -> PathBuf {
 /// records skipped, and ends without an error.
 #[test]
 fn replay_skips_and_counts_records_above_the_bound_in_chunks() {
-    use drogue_vision::log::replay;
+    use drogue_vision::source::replay;
     let dir = tempfile::tempdir().unwrap();
     let path = log_in(dir.path());
     let mut reader = replay::open(&path).unwrap();
@@ -277,7 +277,8 @@ fn replay_skips_and_counts_records_above_the_bound_in_chunks() {
 /// same frames.
 #[test]
 fn recover_skips_and_counts_records_above_the_bound_in_chunks() {
-    use drogue_vision::log::{recover, replay};
+    use drogue_vision::log::recover;
+    use drogue_vision::source::replay;
     let dir = tempfile::tempdir().unwrap();
     let path = log_in(dir.path());
     let out = dir.path().join("rec.mcap");

@@ -14,6 +14,7 @@ use drogue_vision::measure::ellipse::{Conic, Ellipse};
 use drogue_vision::measure::pose::{CirclePose, cone_pose, pose_uncertainty};
 use drogue_vision::measure::track::Tracker;
 use drogue_vision::measure::{Disambiguation, FitQuality};
+use drogue_vision::spatial::{Direction, Point};
 use nalgebra::{Matrix2, Matrix3, SMatrix, SVector, Vector2, Vector3};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -40,7 +41,7 @@ fn plane_basis(n: &Vector3<f64>) -> (Vector3<f64>, Vector3<f64>) {
 /// circle's conic mapped through the homography K [r u, r v, centre].
 fn exact_ellipse(cam: &CameraModel, pose: &CirclePose, radius: f64) -> Ellipse {
     let (u, v) = plane_basis(&pose.normal_camera);
-    let h = cam.k * Matrix3::from_columns(&[u * radius, v * radius, pose.centre_camera_m]);
+    let h = cam.k * Matrix3::from_columns(&[u * radius, v * radius, *pose.centre_camera_m]);
     let h_inv = h.try_inverse().unwrap();
     let c0 = Matrix3::from_diagonal(&Vector3::new(1.0, 1.0, -1.0));
     let conic = Conic::from_matrix(&(h_inv.transpose() * c0 * h_inv));
@@ -72,8 +73,8 @@ fn random_circle(rng: &mut ChaCha8Rng, cam: &CameraModel, tilt: f64) -> CirclePo
     let axis = azimuth.cos() * u + azimuth.sin() * v;
     let normal = nalgebra::Rotation3::new(axis * tilt) * toward_camera;
     CirclePose {
-        centre_camera_m: centre,
-        normal_camera: normal,
+        centre_camera_m: Point::new(centre),
+        normal_camera: Direction::new(normal),
     }
 }
 
@@ -121,8 +122,8 @@ fn closed_form_pose(cam: &CameraModel, e: &Ellipse, radius: f64) -> [CirclePose;
             n = -n;
         }
         CirclePose {
-            centre_camera_m: centre,
-            normal_camera: n,
+            centre_camera_m: Point::new(centre),
+            normal_camera: Direction::new(n),
         }
     };
     [solve(1.0), solve(-1.0)]
@@ -348,8 +349,10 @@ fn covariance_is_consistent_with_actual_errors() {
             let tilt = rng.random_range(25f64..60.0).to_radians();
             let truth = random_circle(&mut rng, &cam, tilt);
             let truth = CirclePose {
-                centre_camera_m: truth.centre_camera_m
-                    * (rng.random_range(1.0..8.0) / truth.centre_camera_m.norm()),
+                centre_camera_m: Point::new(
+                    *truth.centre_camera_m
+                        * (rng.random_range(1.0..8.0) / truth.centre_camera_m.norm()),
+                ),
                 ..truth
             };
             let exact = exact_ellipse(&cam, &truth, radius);
@@ -484,8 +487,8 @@ fn swing(sigma_px: f64, far_m: f64, seed: u64) -> f64 {
         let (u, v) = plane_basis(&toward_camera);
         let axis = axis_angle.cos() * u + axis_angle.sin() * v;
         let truth = CirclePose {
-            centre_camera_m: centre,
-            normal_camera: nalgebra::Rotation3::new(axis * tilt) * toward_camera,
+            centre_camera_m: Point::new(centre),
+            normal_camera: Direction::new(nalgebra::Rotation3::new(axis * tilt) * toward_camera),
         };
         let exact = exact_ellipse(&cam, &truth, radius);
         let ellipse = Ellipse::new(

@@ -119,7 +119,7 @@ fn answer_given_with_fit_error(set_name: &str, sigma_px: f64) -> (Vec<f64>, Vec<
             }
             normal_err_deg.push(err.to_degrees());
             position_err_pct
-                .push(100.0 * (choice.pose.centre_camera_m - t.position).norm() / t.range_m);
+                .push(100.0 * (*choice.pose.centre_camera_m - t.position).norm() / t.range_m);
         }
     }
     normal_err_deg.sort_by(f64::total_cmp);
@@ -190,8 +190,8 @@ fn truth_ellipse_gives_truth_pose_and_rim_picks_it(set_name: &str) {
             1
         };
         let (found, other): (CirclePose, CirclePose) = (solutions[i], solutions[1 - i]);
-        let pos_err = (found.centre_camera_m - t.position).norm();
-        let alt_pos_err = (other.centre_camera_m - t.alt_position).norm();
+        let pos_err = (*found.centre_camera_m - t.position).norm();
+        let alt_pos_err = (*other.centre_camera_m - t.alt_position).norm();
         let n_err = angle(&found.normal_camera, &normal);
         let alt_n_err = angle(&other.normal_camera, &t.alt_normal);
         println!(

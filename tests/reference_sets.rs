@@ -85,7 +85,7 @@ fn measure_set(set: &Path) -> SetResult {
         let range = t.range_m.unwrap_or_else(|| tp.norm());
         let e = d.ellipse_px;
         let centre = (e.cx - te.cx).hypot(e.cy - te.cy);
-        let position = 100.0 * (d.pose_camera.centre_camera_m - tp).norm() / range;
+        let position = 100.0 * (*d.pose_camera.centre_camera_m - tp).norm() / range;
         let mut normal = angle_deg(&d.pose_camera.normal_camera, &tn);
         if d.disambiguation == Disambiguation::Unresolved
             && let Some(alt) = &d.alt_pose_camera

@@ -32,7 +32,7 @@ static ONE_RUN_AT_A_TIME: std::sync::Mutex<()> = std::sync::Mutex::new(());
 fn one_run_at_a_time() -> std::sync::MutexGuard<'static, ()> {
     ONE_RUN_AT_A_TIME
         .lock()
-        .unwrap_or_else(|poisoned| poisoned.into_inner())
+        .unwrap_or_else(std::sync::PoisonError::into_inner)
 }
 
 const SCENARIO: &str = r#"

@@ -35,9 +35,8 @@ fn signal(child: &Child, sig: &str) {
 /// reached the file's end without an error.
 fn stream_frames(bytes: &[u8]) -> (usize, bool) {
     let mut frames = 0;
-    let stream = match mcap::MessageStream::new(bytes) {
-        Ok(s) => s,
-        Err(_) => return (0, false),
+    let Ok(stream) = mcap::MessageStream::new(bytes) else {
+        return (0, false);
     };
     for m in stream {
         match m {

@@ -3,7 +3,8 @@
 //! than the record limit.
 #![no_main]
 
-use drogue_vision::log::{recover, replay};
+use drogue_vision::log::recover;
+use drogue_vision::source::replay;
 use libfuzzer_sys::fuzz_target;
 
 fuzz_target!(|data: &[u8]| {

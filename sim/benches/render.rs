@@ -48,7 +48,7 @@ fn bench_frame(c: &mut Criterion, label: &str, name: &str, seq: u64, redraw_prob
             b.iter(|| {
                 k += 1;
                 black_box(sim.render_scene(black_box(&scenes[k % 2])))
-            })
+            });
         },
     );
     c.bench_function(
@@ -61,7 +61,7 @@ fn bench_frame(c: &mut Criterion, label: &str, name: &str, seq: u64, redraw_prob
                     black_box(sim.render_scene(black_box(&scenes[k % 2])));
                 }
                 start.elapsed()
-            })
+            });
         },
     );
 }

@@ -4,12 +4,17 @@
 //! only what it changes; an unknown key is an error naming the file and key.
 //! Builtin scenarios are embedded, so they work with no files around.
 
-use crate::bounds::{self, Range};
+use crate::bounds;
 use crate::camera::SimCamera;
 use crate::error::SimError;
-use crate::turbulence::{self, Intensity};
+use crate::turbulence::Intensity;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
+
+mod checks;
+mod defaults;
+
+pub use checks::RANGES;
 
 /// The builtin scenarios: name and TOML text.
 pub const BUILTINS: [(&str, &str); 5] = [
@@ -24,99 +29,6 @@ pub const BUILTINS: [(&str, &str); 5] = [
     ),
     ("low_sun", include_str!("../scenarios/low_sun.toml")),
     ("contact", include_str!("../scenarios/contact.toml")),
-];
-
-/// Largest whole number a TOML file can hold (its integers are i64).
-const ANY_U64: f64 = i64::MAX as f64;
-/// Metres of a position within the scene (tanker, drogue, receiver offsets).
-const SCENE_M: Range = Range::closed(-1000.0, 1000.0);
-/// Metres of a position on the receiver's body.
-const BODY_M: Range = Range::closed(-100.0, 100.0);
-/// An angle, degrees.
-const ANGLE_DEG: Range = Range::closed(-360.0, 360.0);
-/// A relative radiance (1 = the sensor's white at gain 1).
-const RADIANCE: Range = Range::closed(0.0, 1.0);
-
-/// The allowed range of every number of a scenario, by dotted key (vectors:
-/// each element). A value outside it (NaN and infinities always are) is
-/// refused naming the file, the key and this range; a key missing here is
-/// refused too (the tests load every key). This table is the scenario
-/// reference's list of ranges (README: "Scenarios").
-pub const RANGES: &[(&str, Range)] = &[
-    ("seed", Range::closed(0.0, ANY_U64)),
-    ("fps", Range::above(0.0, 1000.0)),
-    ("duration_s", Range::above(0.0, 1_000_000.0)),
-    ("start_time_ns", Range::closed(0.0, ANY_U64)),
-    ("camera.width", Range::closed(16.0, 16_384.0)),
-    ("camera.height", Range::closed(16.0, 16_384.0)),
-    ("camera.fx", Range::above(0.0, 1_000_000.0)),
-    ("camera.fy", Range::above(0.0, 1_000_000.0)),
-    ("camera.cx", Range::closed(-100_000.0, 100_000.0)),
-    ("camera.cy", Range::closed(-100_000.0, 100_000.0)),
-    ("camera.distortion", Range::closed(-100.0, 100.0)),
-    ("camera.exposure_ms", Range::closed(0.0, 1000.0)),
-    ("camera.gain", Range::above(0.0, 100.0)),
-    ("camera.read_noise_dn", Range::closed(0.0, 255.0)),
-    ("camera.shot_noise_dn", Range::closed(0.0, 255.0)),
-    ("camera.vignette", Range::closed(0.0, 1.0)),
-    ("mount.position_body_m", BODY_M),
-    ("mount.roll_deg", ANGLE_DEG),
-    ("mount.pitch_deg", ANGLE_DEG),
-    ("mount.yaw_deg", ANGLE_DEG),
-    ("mount.probe_tip_body_m", BODY_M),
-    ("mount.probe_base_body_m", BODY_M),
-    ("mount.probe_base_radius_m", Range::above(0.0, 10.0)),
-    ("mount.probe_tip_radius_m", Range::above(0.0, 10.0)),
-    ("tanker.airspeed_mps", Range::above(0.0, 1000.0)),
-    (
-        "tanker.altitude_m",
-        Range::closed(turbulence::MIN_ALTITUDE_M, 25_000.0),
-    ),
-    ("tanker.heading_deg", ANGLE_DEG),
-    ("drogue.inner_radius_m", Range::above(0.0, 10.0)),
-    ("drogue.canopy_radius_m", Range::above(0.0, 20.0)),
-    ("drogue.trail_offset_m", SCENE_M),
-    ("drogue.hose_exit_m", SCENE_M),
-    ("drogue.hose_radius_m", Range::above(0.0, 1.0)),
-    ("drogue.struts", Range::closed(0.0, 64.0)),
-    ("drogue.strut_width_m", Range::closed(0.0, 1.0)),
-    ("drogue.rim_width_m", Range::closed(0.0, 1.0)),
-    ("drogue.roll_deg", ANGLE_DEG),
-    ("drogue.disc_radiance", RADIANCE),
-    ("drogue.canopy_radiance", RADIANCE),
-    ("drogue.rim_radiance", RADIANCE),
-    ("drogue.strut_radiance", RADIANCE),
-    ("drogue.hose_radiance", RADIANCE),
-    ("drogue.probe_radiance", RADIANCE),
-    ("turbulence.hose_lever_m", Range::above(0.0, 1000.0)),
-    ("turbulence.sway_lag_s", Range::above(0.0, 100.0)),
-    ("bow_wave.max_push_m", Range::closed(0.0, 10.0)),
-    ("bow_wave.decay_m", Range::above(0.0, 100.0)),
-    ("bow_wave.width_m", Range::above(0.0, 100.0)),
-    ("whip.amplitude_m", Range::closed(0.0, 10.0)),
-    ("whip.frequency_hz", Range::closed(0.0, 100.0)),
-    ("whip.damping_s", Range::above(0.0, 1000.0)),
-    ("whip.capture_radius_m", Range::closed(0.0, 10.0)),
-    ("receiver.start_offset_m", SCENE_M),
-    ("receiver.end_offset_m", SCENE_M),
-    ("receiver.approach_start_s", Range::closed(0.0, 1_000_000.0)),
-    ("receiver.approach_end_s", Range::closed(0.0, 1_000_000.0)),
-    ("receiver.tracking_lag_s", Range::closed(0.0, 100.0)),
-    ("receiver.roll_deg", ANGLE_DEG),
-    ("receiver.pitch_deg", ANGLE_DEG),
-    ("receiver.yaw_deg", ANGLE_DEG),
-    ("receiver.wobble_deg", Range::closed(0.0, 90.0)),
-    ("receiver.wobble_hz", Range::closed(0.0, 100.0)),
-    ("scene.sky_zenith", RADIANCE),
-    ("scene.sky_horizon", RADIANCE),
-    ("scene.ground", RADIANCE),
-    ("scene.cloud_cover", Range::closed(0.0, 1.0)),
-    ("scene.cloud_radiance", RADIANCE),
-    ("scene.sun_azimuth_deg", ANGLE_DEG),
-    ("scene.sun_elevation_deg", Range::closed(-90.0, 90.0)),
-    ("scene.glare", Range::closed(0.0, 10.0)),
-    ("scene.haze", Range::closed(0.0, 1.0)),
-    ("scene.haze_radiance", RADIANCE),
 ];
 
 /// One simulated run.
@@ -304,165 +216,6 @@ pub struct SceneSpec {
     pub motion_blur: bool,
 }
 
-impl Default for Scenario {
-    fn default() -> Self {
-        Scenario {
-            name: "approach".into(),
-            seed: 1,
-            fps: 30.0,
-            duration_s: 20.0,
-            start_time_ns: 1_790_000_000_000_000_000,
-            camera: CameraSpec::default(),
-            mount: MountSpec::default(),
-            tanker: TankerSpec::default(),
-            drogue: DrogueSpec::default(),
-            turbulence: TurbulenceSpec::default(),
-            bow_wave: BowWaveSpec::default(),
-            whip: WhipSpec::default(),
-            receiver: ReceiverSpec::default(),
-            scene: SceneSpec::default(),
-            base_dir: String::new(),
-            source_name: "approach".into(),
-        }
-    }
-}
-
-impl Default for CameraSpec {
-    fn default() -> Self {
-        // The paper's 5 mm lens on 3.75 um pixels, with mild barrel distortion.
-        CameraSpec {
-            file: String::new(),
-            width: 1280,
-            height: 960,
-            fx: 1336.2,
-            fy: 1335.4,
-            cx: 646.3,
-            cy: 473.8,
-            distortion: [-0.08, 0.05, 0.0004, -0.0003, 0.0],
-            exposure_ms: 2.0,
-            gain: 1.0,
-            read_noise_dn: 1.5,
-            shot_noise_dn: 0.02,
-            vignette: 0.15,
-        }
-    }
-}
-
-impl Default for MountSpec {
-    fn default() -> Self {
-        MountSpec {
-            position_body_m: [2.5, 0.3, -0.9],
-            roll_deg: 0.0,
-            pitch_deg: 2.0,
-            yaw_deg: 6.0,
-            probe_tip_body_m: [6.0, 0.75, -0.85],
-            probe_base_body_m: [3.0, 0.75, -0.7],
-            probe_base_radius_m: 0.06,
-            probe_tip_radius_m: 0.035,
-        }
-    }
-}
-
-impl Default for TankerSpec {
-    fn default() -> Self {
-        TankerSpec {
-            airspeed_mps: 120.0,
-            altitude_m: 3000.0,
-            heading_deg: 0.0,
-        }
-    }
-}
-
-impl Default for DrogueSpec {
-    fn default() -> Self {
-        DrogueSpec {
-            inner_radius_m: 0.15,
-            canopy_radius_m: 0.33,
-            trail_offset_m: [-40.0, 10.0, 12.0],
-            hose_exit_m: [-18.0, 10.0, 2.0],
-            hose_radius_m: 0.045,
-            struts: 8,
-            strut_width_m: 0.018,
-            rim_width_m: 0.018,
-            roll_deg: 10.0,
-            disc_radiance: 0.10,
-            canopy_radiance: 0.72,
-            rim_radiance: 0.38,
-            strut_radiance: 0.40,
-            hose_radiance: 0.09,
-            probe_radiance: 0.16,
-        }
-    }
-}
-
-impl Default for TurbulenceSpec {
-    fn default() -> Self {
-        TurbulenceSpec {
-            intensity: Intensity::Light,
-            hose_lever_m: 15.0,
-            sway_lag_s: 0.8,
-        }
-    }
-}
-
-impl Default for BowWaveSpec {
-    fn default() -> Self {
-        BowWaveSpec {
-            enabled: true,
-            max_push_m: 0.25,
-            decay_m: 1.5,
-            width_m: 0.8,
-        }
-    }
-}
-
-impl Default for WhipSpec {
-    fn default() -> Self {
-        WhipSpec {
-            enabled: true,
-            amplitude_m: 0.6,
-            frequency_hz: 1.2,
-            damping_s: 1.5,
-            capture_radius_m: 0.12,
-        }
-    }
-}
-
-impl Default for ReceiverSpec {
-    fn default() -> Self {
-        ReceiverSpec {
-            start_offset_m: [-12.0, 0.4, -0.3],
-            end_offset_m: [0.0, 0.0, 0.0],
-            approach_start_s: 1.0,
-            approach_end_s: 19.0,
-            tracking_lag_s: 0.6,
-            roll_deg: 0.0,
-            pitch_deg: 3.0,
-            yaw_deg: 0.0,
-            wobble_deg: 0.3,
-            wobble_hz: 0.4,
-        }
-    }
-}
-
-impl Default for SceneSpec {
-    fn default() -> Self {
-        SceneSpec {
-            sky_zenith: 0.50,
-            sky_horizon: 0.68,
-            ground: 0.55,
-            cloud_cover: 0.5,
-            cloud_radiance: 0.85,
-            sun_azimuth_deg: 140.0,
-            sun_elevation_deg: 45.0,
-            glare: 0.0,
-            haze: 0.0,
-            haze_radiance: 0.75,
-            motion_blur: true,
-        }
-    }
-}
-
 impl Scenario {
     /// Names of the builtin scenarios.
     pub fn builtin_names() -> Vec<&'static str> {
@@ -522,8 +275,7 @@ impl Scenario {
                 .message()
                 .split('`')
                 .nth(1)
-                .map(str::to_string)
-                .unwrap_or_else(|| "(toml)".into());
+                .map_or_else(|| "(toml)".into(), str::to_string);
             SimError::Scenario {
                 file: file_name.to_string(),
                 key,
@@ -548,108 +300,6 @@ impl Scenario {
         })?;
         s.validate()?;
         Ok(s)
-    }
-
-    fn bad(&self, key: &str, message: &str) -> SimError {
-        SimError::Scenario {
-            file: self.source_name.clone(),
-            key: key.to_string(),
-            message: message.to_string(),
-        }
-    }
-
-    fn validate(&self) -> Result<(), SimError> {
-        let positive = [
-            ("fps", self.fps),
-            ("duration_s", self.duration_s),
-            ("tanker.airspeed_mps", self.tanker.airspeed_mps),
-            ("drogue.inner_radius_m", self.drogue.inner_radius_m),
-            ("drogue.hose_radius_m", self.drogue.hose_radius_m),
-            ("turbulence.hose_lever_m", self.turbulence.hose_lever_m),
-            ("turbulence.sway_lag_s", self.turbulence.sway_lag_s),
-            ("bow_wave.decay_m", self.bow_wave.decay_m),
-            ("bow_wave.width_m", self.bow_wave.width_m),
-            ("whip.damping_s", self.whip.damping_s),
-            ("camera.gain", self.camera.gain),
-            ("mount.probe_base_radius_m", self.mount.probe_base_radius_m),
-            ("mount.probe_tip_radius_m", self.mount.probe_tip_radius_m),
-        ];
-        for (key, v) in positive {
-            if !(v.is_finite() && v > 0.0) {
-                return Err(self.bad(key, "must be a finite number > 0"));
-            }
-        }
-        let non_negative = [
-            ("camera.exposure_ms", self.camera.exposure_ms),
-            ("camera.read_noise_dn", self.camera.read_noise_dn),
-            ("camera.shot_noise_dn", self.camera.shot_noise_dn),
-            ("camera.vignette", self.camera.vignette),
-            ("receiver.tracking_lag_s", self.receiver.tracking_lag_s),
-            ("scene.glare", self.scene.glare),
-            ("bow_wave.max_push_m", self.bow_wave.max_push_m),
-            ("whip.amplitude_m", self.whip.amplitude_m),
-            ("whip.frequency_hz", self.whip.frequency_hz),
-            ("whip.capture_radius_m", self.whip.capture_radius_m),
-            ("drogue.strut_width_m", self.drogue.strut_width_m),
-            ("drogue.rim_width_m", self.drogue.rim_width_m),
-        ];
-        for (key, v) in non_negative {
-            if !(v.is_finite() && v >= 0.0) {
-                return Err(self.bad(key, "must be a finite number >= 0"));
-            }
-        }
-        if self.drogue.canopy_radius_m <= self.drogue.inner_radius_m {
-            return Err(self.bad("drogue.canopy_radius_m", "must exceed inner_radius_m"));
-        }
-        if self.receiver.approach_end_s < self.receiver.approach_start_s {
-            return Err(self.bad("receiver.approach_end_s", "must be >= approach_start_s"));
-        }
-        if self.tanker.altitude_m < turbulence::MIN_ALTITUDE_M {
-            return Err(self.bad(
-                "tanker.altitude_m",
-                "must be >= 610 m (2000 ft): the medium/high-altitude Dryden model",
-            ));
-        }
-        if self.frame_count() > 10_000_000 {
-            return Err(self.bad("duration_s", "more than 10 million frames"));
-        }
-        for (key, v) in [
-            ("scene.haze", self.scene.haze),
-            ("scene.cloud_cover", self.scene.cloud_cover),
-        ] {
-            if !(0.0..=1.0).contains(&v) {
-                return Err(self.bad(key, "must be within 0..1"));
-            }
-        }
-        let all_finite = [
-            self.drogue.trail_offset_m,
-            self.drogue.hose_exit_m,
-            self.mount.position_body_m,
-            self.mount.probe_tip_body_m,
-            self.mount.probe_base_body_m,
-            self.receiver.start_offset_m,
-            self.receiver.end_offset_m,
-        ]
-        .iter()
-        .flatten()
-        .chain(self.camera.distortion.iter())
-        .all(|v| v.is_finite());
-        if !all_finite {
-            return Err(self.bad("(vectors)", "every number must be finite"));
-        }
-        if self.camera.file.is_empty() {
-            if self.camera.width < 16
-                || self.camera.height < 16
-                || self.camera.width > 16384
-                || self.camera.height > 16384
-            {
-                return Err(self.bad("camera.width", "image size must be within 16..16384"));
-            }
-            if !(self.camera.fx > 0.0 && self.camera.fy > 0.0) {
-                return Err(self.bad("camera.fx", "focal lengths must be > 0"));
-            }
-        }
-        Ok(())
     }
 
     /// Number of frames of the run.

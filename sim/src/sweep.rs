@@ -14,14 +14,18 @@
 
 use crate::TruthEllipse;
 use crate::camera::SimCamera;
-use crate::conic::{circle_image_conic, conic_to_ellipse, mirror_pose};
-use crate::geometry::{V3, perpendicular, r_body_cam};
-use crate::render::{Decal, DecalShape, DrogueView, FrameScene, GlareStreak, Look, Renderer, Tube};
-use crate::simulator::MIN_VISIBLE_RIM;
+use crate::geometry::{V3, r_body_cam};
+use crate::render::{FrameScene, GlareStreak, Look, Renderer};
 use image::GrayImage;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use std::f64::consts::{PI, TAU};
+
+mod layout;
+mod look_alikes;
+
+use layout::{lay_out_drogue, placeholder_drogue};
+use look_alikes::{dark_shape, look_alikes};
 
 /// Radius of the dark inner circle, metres (the reference data's).
 pub const INNER_RADIUS_M: f64 = 0.15;
@@ -146,7 +150,10 @@ impl Level {
 /// The sweep's levels: each factor over its range, then everything at once,
 /// then the drogue-free kinds.
 pub fn standard_levels() -> Vec<Level> {
-    use Factor::*;
+    use Factor::{
+        Baseline, Blur, CanopylessDisc, Crescent, DarkRing, DarkShapes, Distortion, Distractors,
+        Everything, Exposure, Glare, Haze, Noise, Occlusion, Range, Tilt, Vignetting,
+    };
     let mut levels = vec![Level::new(Baseline, 0.0)];
     let mut add = |f: Factor, values: &[f64]| {
         levels.extend(values.iter().map(|&v| Level::new(f, v)));
@@ -437,326 +444,6 @@ fn settings(level: &Level, rng: &mut ChaCha8Rng) -> Settings {
         | Factor::DarkShapes => {}
     }
     s
-}
-
-/// A drogue view that is not drawn (drogue-free frames).
-fn placeholder_drogue() -> DrogueView {
-    DrogueView {
-        centre: V3::new(0.0, 0.0, 10.0),
-        normal: V3::new(0.0, 0.0, -1.0),
-        e1: V3::x(),
-        e2: V3::y(),
-        inner_radius: INNER_RADIUS_M,
-        canopy_radius: CANOPY_RADIUS_M,
-        rim_width: 0.018,
-        struts: 0,
-        strut_width: 0.0,
-        disc: 0.1,
-        canopy: 0.72,
-        rim: 0.38,
-        strut: 0.4,
-    }
-}
-
-/// A plane at `centre` tilted from facing the camera by `tilt` radians about
-/// a random axis, with a random in-plane turn: (normal toward the camera,
-/// e1, e2).
-fn random_plane(centre: &V3, tilt: f64, rng: &mut ChaCha8Rng) -> (V3, V3, V3) {
-    let los = -centre.normalize();
-    let p = perpendicular(&los);
-    let q = los.cross(&p);
-    let phi = rng.random_range(0.0..TAU);
-    let axis = p * phi.cos() + q * phi.sin();
-    let normal = (los * tilt.cos() + axis.cross(&los) * tilt.sin()).normalize();
-    let b = perpendicular(&normal);
-    let roll = rng.random_range(0.0..TAU);
-    let e1 = b * roll.cos() + normal.cross(&b) * roll.sin();
-    let e2 = normal.cross(&e1);
-    (normal, e1, e2)
-}
-
-/// A point at `range` metres along the ray of a random pixel at least
-/// `margin` pixels inside the frame (the centre when the margin leaves none).
-fn random_point(cam: &SimCamera, range: f64, margin: f64, rng: &mut ChaCha8Rng) -> V3 {
-    let pick = |rng: &mut ChaCha8Rng, size: u32, centre: f64| {
-        let (lo, hi) = (margin, size as f64 - 1.0 - margin);
-        if lo < hi {
-            rng.random_range(lo..hi)
-        } else {
-            centre
-        }
-    };
-    let u = pick(rng, cam.width, cam.cx);
-    let v = pick(rng, cam.height, cam.cy);
-    let ray = cam.ray_camera([u, v]).unwrap_or(V3::new(0.0, 0.0, 1.0));
-    ray.normalize() * range
-}
-
-/// Shares of the inner rim (circle of `radius` about `centre` in the plane
-/// e1, e2) hidden by the probe and visible: (probe, visible, all in image).
-fn rim_shares(
-    cam: &SimCamera,
-    centre: &V3,
-    e1: &V3,
-    e2: &V3,
-    radius: f64,
-    probe: Option<&Tube>,
-    hose: Option<&Tube>,
-) -> (f64, f64, bool) {
-    let (mut by_probe, mut visible, mut in_image) = (0usize, 0usize, 0usize);
-    for k in 0..RIM_POINTS {
-        let a = k as f64 * TAU / RIM_POINTS as f64;
-        let p = centre + (e1 * a.cos() + e2 * a.sin()) * radius;
-        if p.z <= 1e-6 {
-            continue;
-        }
-        let ray = p / p.z;
-        let hid_probe = probe.is_some_and(|t| t.occludes(&ray, p.z));
-        let hid_hose = hose.is_some_and(|t| t.occludes(&ray, p.z));
-        let inside = cam.project_px(&p).is_some_and(|q| cam.in_image(q));
-        by_probe += hid_probe as usize;
-        in_image += inside as usize;
-        visible += (inside && !hid_probe && !hid_hose) as usize;
-    }
-    let n = RIM_POINTS as f64;
-    (
-        by_probe as f64 / n,
-        visible as f64 / n,
-        in_image == RIM_POINTS,
-    )
-}
-
-/// The drogue, its hose, the probe (occlusion levels) and the truth.
-fn lay_out_drogue(
-    cam: &SimCamera,
-    s: &Settings,
-    rng: &mut ChaCha8Rng,
-) -> (DrogueView, Tube, Option<Tube>, DrogueTruth) {
-    let canopy_px = cam.fx * CANOPY_RADIUS_M / s.range_m;
-    let inner_px = cam.fx * INNER_RADIUS_M / s.range_m;
-    // The whole inner rim in the image (tried a few times, then the centre).
-    let mut centre = V3::new(0.0, 0.0, s.range_m);
-    let mut plane = random_plane(&centre, s.tilt_deg.to_radians(), rng);
-    for attempt in 0..20 {
-        let margin = if attempt < 19 {
-            (1.1 * canopy_px).max(2.0 * inner_px + 10.0)
-        } else {
-            f64::INFINITY
-        };
-        let c = random_point(cam, s.range_m, margin, rng);
-        let pl = random_plane(&c, s.tilt_deg.to_radians(), rng);
-        let (_, _, all_in) = rim_shares(cam, &c, &pl.1, &pl.2, INNER_RADIUS_M, None, None);
-        (centre, plane) = (c, pl);
-        if all_in {
-            break;
-        }
-    }
-    let (normal, e1, e2) = plane;
-    let drogue = DrogueView {
-        centre,
-        normal,
-        e1,
-        e2,
-        inner_radius: INNER_RADIUS_M,
-        canopy_radius: CANOPY_RADIUS_M,
-        rim_width: 0.018,
-        struts: 8,
-        strut_width: 0.018,
-        disc: 0.10,
-        canopy: 0.72,
-        rim: 0.38,
-        strut: 0.40,
-    };
-    // The hose leaves the coupling behind the disc, toward the tanker
-    // (ahead and above).
-    let hose = Tube {
-        a: centre - normal * 0.05,
-        b: centre
-            + V3::new(
-                rng.random_range(-3.0..3.0),
-                -rng.random_range(3.0..8.0),
-                rng.random_range(10.0..25.0),
-            ),
-        radius_a: 0.045,
-        radius_b: 0.045,
-        radiance: 0.09,
-    };
-    let probe = s
-        .probe_bin
-        .and_then(|bin| place_probe(cam, &drogue, &hose, bin, rng));
-    let (probe_frac, visible, _) = rim_shares(
-        cam,
-        &centre,
-        &e1,
-        &e2,
-        INNER_RADIUS_M,
-        probe.as_ref(),
-        Some(&hose),
-    );
-    let ellipse = circle_image_conic(cam, &centre, &normal, INNER_RADIUS_M)
-        .and_then(|c| conic_to_ellipse(&c))
-        .unwrap_or(TruthEllipse {
-            cx: f64::NAN,
-            cy: f64::NAN,
-            a: f64::NAN,
-            b: f64::NAN,
-            theta: f64::NAN,
-        });
-    let (alt_c, alt_n) =
-        mirror_pose(cam, &centre, &normal, INNER_RADIUS_M).unwrap_or((centre, normal));
-    let range = centre.norm();
-    let truth = DrogueTruth {
-        ellipse,
-        position_camera: centre.into(),
-        normal_camera: normal.into(),
-        alt_position_camera: alt_c.into(),
-        alt_normal_camera: alt_n.into(),
-        range_m: range,
-        tilt_deg: (normal.dot(&(-centre)) / range)
-            .clamp(-1.0, 1.0)
-            .acos()
-            .to_degrees(),
-        probe_rim_frac: probe_frac,
-        visible_rim_frac: visible,
-        expect_detect: visible >= MIN_VISIBLE_RIM && ellipse.a.is_finite(),
-    };
-    (drogue, hose, probe, truth)
-}
-
-/// A probe between the camera and the drogue hiding a share of the inner
-/// rim within `bin` (as near as the geometry allows): a tube at 45-70 % of
-/// the drogue's depth coming in from a random side, its tip just past the
-/// disc's centre line, moved sideways until the share is in the bin.
-fn place_probe(
-    cam: &SimCamera,
-    d: &DrogueView,
-    hose: &Tube,
-    bin: (f64, f64),
-    rng: &mut ChaCha8Rng,
-) -> Option<Tube> {
-    let target = rng.random_range(bin.0.max(0.02)..bin.1);
-    let c_hat = d.centre.normalize();
-    let (x, y) = (perpendicular(&c_hat), c_hat.cross(&perpendicular(&c_hat)));
-    let mut best: Option<(f64, Tube)> = None;
-    for _ in 0..8 {
-        let k = rng.random_range(0.45..0.7);
-        let psi = rng.random_range(0.0..TAU);
-        let dir = x * psi.cos() + y * psi.sin();
-        let side = c_hat.cross(&dir);
-        let tip_along = -rng.random_range(0.1..0.5) * d.inner_radius;
-        let reach = d.inner_radius + 0.25;
-        for step in 0..=80 {
-            let offset = -reach + 2.0 * reach * step as f64 / 80.0;
-            // Points at the drogue's depth scaled by k: same image position.
-            let at = |along: f64| (d.centre + side * offset + dir * along) * k;
-            let tube = Tube {
-                a: at(tip_along + 3.0),
-                b: at(tip_along),
-                radius_a: 0.06,
-                radius_b: 0.035,
-                radiance: 0.16,
-            };
-            let (frac, _, _) = rim_shares(
-                cam,
-                &d.centre,
-                &d.e1,
-                &d.e2,
-                d.inner_radius,
-                Some(&tube),
-                Some(hose),
-            );
-            let miss = (frac - target).abs();
-            if best.as_ref().is_none_or(|(m, _)| miss < *m) {
-                best = Some((miss, tube));
-            }
-        }
-        if best.as_ref().is_some_and(|(m, _)| *m < 0.01) {
-            break;
-        }
-    }
-    best.map(|(_, t)| t)
-}
-
-/// A dark blob or rectangle far behind the drogue, 15-120 px across, near
-/// `near_px` (within 350 px) half the time when given, else anywhere.
-fn dark_shape(cam: &SimCamera, rng: &mut ChaCha8Rng, near_px: Option<[f64; 2]>) -> Decal {
-    let depth = rng.random_range(15.0..80.0);
-    let size_px = rng.random_range(15.0..120.0);
-    let size_m = size_px * depth / cam.fx / 2.0;
-    let centre = match near_px {
-        Some(p) if rng.random_bool(0.5) => {
-            let (a, r) = (rng.random_range(0.0..TAU), rng.random_range(0.0..350.0));
-            let q = [
-                (p[0] + r * a.cos()).clamp(0.0, cam.width as f64 - 1.0),
-                (p[1] + r * a.sin()).clamp(0.0, cam.height as f64 - 1.0),
-            ];
-            cam.ray_camera(q).unwrap_or(V3::z()).normalize() * depth
-        }
-        _ => random_point(cam, depth, 0.0, rng),
-    };
-    let (normal, e1, e2) = random_plane(&centre, rng.random_range(0.0..0.7), rng);
-    let shape = if rng.random_bool(0.5) {
-        DecalShape::Blob {
-            radius: size_m,
-            wobble: rng.random_range(0.1..0.35),
-            phase: rng.random_range(0.0..TAU),
-        }
-    } else {
-        let aspect: f64 = rng.random_range(1.0..4.0);
-        DecalShape::Rect {
-            half_1: size_m,
-            half_2: size_m / aspect,
-        }
-    };
-    Decal {
-        centre,
-        normal,
-        e1,
-        e2,
-        shape,
-        radiance: rng.random_range(0.05..0.3),
-    }
-}
-
-/// The look-alikes of a drogue-free level.
-fn look_alikes(factor: Factor, cam: &SimCamera, rng: &mut ChaCha8Rng) -> Vec<Decal> {
-    let range = rng.random_range(2.0..10.0);
-    let tilt = rng.random_range(0.0f64..50.0).to_radians();
-    let radius = rng.random_range(0.1..0.35);
-    let margin = 2.5 * cam.fx * radius / range + 10.0;
-    let centre = random_point(cam, range, margin, rng);
-    let (normal, e1, e2) = random_plane(&centre, tilt, rng);
-    let dark = rng.random_range(0.05..0.2);
-    let shape = |shape: DecalShape| Decal {
-        centre,
-        normal,
-        e1,
-        e2,
-        shape,
-        radiance: dark,
-    };
-    match factor {
-        Factor::Crescent => Decal::crescent(
-            centre,
-            normal,
-            e1,
-            e2,
-            radius,
-            dark,
-            radius * rng.random_range(1.0..1.4),
-            radius * rng.random_range(0.5..1.3),
-            rng.random_range(0.55..0.8),
-        )
-        .to_vec(),
-        Factor::CanopylessDisc => vec![shape(DecalShape::Disc { radius })],
-        Factor::DarkRing => vec![shape(DecalShape::Ring {
-            inner: radius,
-            outer: radius * rng.random_range(1.3..2.2),
-        })],
-        _ => (0..rng.random_range(2..=4))
-            .map(|_| dark_shape(cam, rng, None))
-            .collect(),
-    }
 }
 
 #[cfg(test)]

@@ -45,7 +45,7 @@ struct Queue {
 }
 
 fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
-    m.lock().unwrap_or_else(|p| p.into_inner())
+    m.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
 }
 
 /// The producing side, held by the link tasks.
@@ -124,7 +124,7 @@ impl EventReceiver {
             .0
             .ready
             .wait_timeout_while(q, timeout, |q| q.is_empty())
-            .unwrap_or_else(|p| p.into_inner());
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
         q.pop_front()
     }
 

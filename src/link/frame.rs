@@ -308,21 +308,8 @@ impl FrameEncoder {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::testing::autopilot_heartbeat;
     use mavlink::SigningConfig;
-    use mavlink::dialects::ardupilotmega::{
-        HEARTBEAT_DATA, MavAutopilot, MavModeFlag, MavState, MavType,
-    };
-
-    fn heartbeat() -> MavMessage {
-        MavMessage::HEARTBEAT(HEARTBEAT_DATA {
-            custom_mode: 7,
-            mavtype: MavType::MAV_TYPE_QUADROTOR,
-            autopilot: MavAutopilot::MAV_AUTOPILOT_ARDUPILOTMEGA,
-            base_mode: MavModeFlag::empty(),
-            system_status: MavState::MAV_STATE_ACTIVE,
-            mavlink_version: 3,
-        })
-    }
 
     /// A frame written by the crate's own writer (an independent encoder).
     fn crate_frame(version: MavlinkVersion, seq: u8) -> Vec<u8> {
@@ -332,7 +319,7 @@ mod tests {
             component_id: 1,
             sequence: seq,
         };
-        mavlink::write_versioned_msg(&mut v, version, h, &heartbeat()).unwrap();
+        mavlink::write_versioned_msg(&mut v, version, h, &autopilot_heartbeat(7)).unwrap();
         v
     }
 
@@ -361,7 +348,7 @@ mod tests {
             assert_eq!(c.bad_bytes, 0);
             let seqs: Vec<u8> = out.iter().map(|m| m.header.sequence).collect();
             assert_eq!(seqs, vec![0, 1, 2, 3, 4]);
-            assert_eq!(out[0].message, heartbeat());
+            assert_eq!(out[0].message, autopilot_heartbeat(7));
         }
     }
 
@@ -501,8 +488,8 @@ mod tests {
     #[test]
     fn our_frames_decode_with_the_crate_reader() {
         let mut enc = FrameEncoder::new(1, 197);
-        let a = enc.encode(&heartbeat(), None);
-        let b = enc.encode(&heartbeat(), None);
+        let a = enc.encode(&autopilot_heartbeat(7), None);
+        let b = enc.encode(&autopilot_heartbeat(7), None);
         let mut bytes = a.raw_bytes().to_vec();
         bytes.extend_from_slice(b.raw_bytes());
         let mut r = mavlink::MavlinkReader::new(bytes.as_slice());
@@ -510,7 +497,7 @@ mod tests {
         let (h2, _) = r.read_message::<MavMessage>(MavlinkVersion::V2).unwrap();
         assert_eq!((h1.system_id, h1.component_id, h1.sequence), (1, 197, 0));
         assert_eq!(h2.sequence, 1);
-        assert_eq!(m1, heartbeat());
+        assert_eq!(m1, autopilot_heartbeat(7));
     }
 
     #[test]
@@ -518,8 +505,14 @@ mod tests {
         let key = [42u8; 32];
         let sign = SigningData::from_config(SigningConfig::new(key, 3, true, false));
         let mut enc = FrameEncoder::new(1, 1);
-        let signed = enc.encode(&heartbeat(), Some(&sign)).raw_bytes().to_vec();
-        let unsigned = enc.encode(&heartbeat(), None).raw_bytes().to_vec();
+        let signed = enc
+            .encode(&autopilot_heartbeat(7), Some(&sign))
+            .raw_bytes()
+            .to_vec();
+        let unsigned = enc
+            .encode(&autopilot_heartbeat(7), None)
+            .raw_bytes()
+            .to_vec();
         let mut forged = signed.clone();
         let n = forged.len();
         forged[n - 1] ^= 1; // last byte of the 6-byte signature
@@ -539,7 +532,10 @@ mod tests {
         let optional = SigningData::from_config(SigningConfig::new(key, 0, true, true));
         let mut out = Vec::new();
         let mut c = DecodeCounts::default();
-        let signed2 = enc.encode(&heartbeat(), Some(&sign)).raw_bytes().to_vec();
+        let signed2 = enc
+            .encode(&autopilot_heartbeat(7), Some(&sign))
+            .raw_bytes()
+            .to_vec();
         for f in [&unsigned, &forged, &signed2] {
             d.feed(f, true, Some(&optional), &mut c, &mut out);
         }

@@ -31,7 +31,10 @@ const POLL: Duration = Duration::from_millis(20);
 
 impl Handoff {
     fn update(&self, f: impl FnOnce(&mut Progress)) {
-        let mut p = self.state.lock().unwrap_or_else(|e| e.into_inner());
+        let mut p = self
+            .state
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
         f(&mut p);
         drop(p);
         self.changed.notify_all();
@@ -63,7 +66,10 @@ impl Handoff {
         stopped: impl Fn() -> bool,
     ) -> bool {
         let deadline = Instant::now() + timeout;
-        let mut p = self.state.lock().unwrap_or_else(|e| e.into_inner());
+        let mut p = self
+            .state
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
         loop {
             if p.done_ns >= capture_ns || (p.taken_ns >= capture_ns && !connected()) {
                 return true;
@@ -76,7 +82,7 @@ impl Handoff {
             p = self
                 .changed
                 .wait_timeout(p, slice)
-                .unwrap_or_else(|e| e.into_inner())
+                .unwrap_or_else(std::sync::PoisonError::into_inner)
                 .0;
         }
     }

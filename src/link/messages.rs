@@ -314,14 +314,10 @@ pub fn landing_target_ned(
     det: &Detection,
     vehicle: &VehiclePose,
 ) -> Option<MavMessage> {
-    // The autopilot's attitude: refused unless close to a unit quaternion.
-    let norm = vehicle.q_ned_body.iter().map(|c| c * c).sum::<f64>().sqrt();
-    if norm.is_nan() || norm <= 0.5 {
-        return None;
-    }
-    let q_ned_body = quaternion_from_wxyz(vehicle.q_ned_body)?;
-    let vehicle_ned_m = Vector3::from(vehicle.position_ned_m);
-    let target_ned_m = vehicle_ned_m + q_ned_body * pose.position_body_m;
+    // The autopilot's attitude, refused unless finite and normalised once
+    // more (w first and back: the same bits as when it crossed as an array).
+    let q_ned_body = quaternion_from_wxyz(quaternion_to_wxyz(&vehicle.q_ned_body))?;
+    let target_ned_m = *vehicle.position_ned_m + q_ned_body * pose.position_body_m;
     if !finite3(&target_ned_m) {
         return None;
     }
@@ -479,45 +475,17 @@ pub fn fields_json(msg: &MavMessage) -> Value {
 #[cfg(test)]
 pub(crate) mod tests {
     use super::*;
-    use crate::measure::ellipse::Ellipse;
-    use crate::measure::{CirclePose, Disambiguation, FitQuality, StageTimes};
-    use crate::spatial::{Direction, Point};
+    use crate::measure::StageTimes;
+    use crate::spatial::Point;
     use nalgebra::Matrix3;
 
+    /// The shared test detection ([`crate::testing::detection`]) with the
+    /// covariance, normal sigma and track epoch these tests check.
     pub(crate) fn detection(position_body_m: Vector3<f64>, normal_body: Vector3<f64>) -> Detection {
         Detection {
-            ellipse_px: Ellipse {
-                cx: 640.0,
-                cy: 480.0,
-                a: 50.0,
-                b: 40.0,
-                theta: 0.0,
-            },
-            pose_camera: CirclePose {
-                // Camera frame = body with the default mount (x right = body y ...).
-                centre_camera_m: Vector3::new(
-                    position_body_m.y,
-                    position_body_m.z,
-                    position_body_m.x,
-                ),
-                normal_camera: Vector3::new(normal_body.y, normal_body.z, normal_body.x),
-            },
-            alt_pose_camera: None,
-            disambiguation: Disambiguation::CanopyRim,
-            position_body_m: Point::new(position_body_m),
-            normal_body: Direction::new(normal_body),
-            position_from_probe_body_m: Point::new(position_body_m),
             position_cov_body_m2: Matrix3::from_diagonal(&Vector3::new(1e-4, 4e-6, 9e-6)),
             normal_sigma_rad: 0.01,
-            quality: FitQuality {
-                points: 100,
-                inliers: 90,
-                rms_residual_px: 0.2,
-                score: 0.5,
-            },
-            track_epoch: 258,
-            rim_points_px: vec![],
-            inliers: vec![],
+            ..crate::testing::detection(position_body_m, normal_body, 258)
         }
     }
 
@@ -593,8 +561,8 @@ pub(crate) mod tests {
         let yaw90 = UnitQuaternion::from_euler_angles(0.0, 0.0, std::f64::consts::FRAC_PI_2);
         let vehicle = VehiclePose {
             time_ns: m.capture_time_ns,
-            position_ned_m: [100.0, 20.0, -50.0],
-            q_ned_body: quaternion_to_wxyz(&yaw90),
+            position_ned_m: Point::from_array([100.0, 20.0, -50.0]),
+            q_ned_body: yaw90,
         };
         let MavMessage::LANDING_TARGET(ned) =
             landing_target_ned(&m, &pose, &det, &vehicle).unwrap()

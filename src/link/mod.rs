@@ -347,7 +347,7 @@ impl LinkHandle {
         self.shared
             .telemetry
             .lock()
-            .unwrap_or_else(|p| p.into_inner())
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
             .pose_at(time_ns)
     }
 

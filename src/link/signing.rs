@@ -34,10 +34,9 @@ mod tests {
     fn passphrase_key_is_its_sha256() {
         // SHA-256("abc"), FIPS 180-2 test vector.
         let expect = "ba7816bf8f01cfea414140de5dae2223b00361a396177a9cb410ff61f20015ad";
-        let hex: String = key_from_passphrase("abc")
+        let hex = key_from_passphrase("abc")
             .iter()
-            .map(|b| format!("{b:02x}"))
-            .collect();
+            .fold(String::new(), |s, b| s + &format!("{b:02x}"));
         assert_eq!(hex, expect);
     }
 

@@ -104,7 +104,7 @@ pub(crate) fn bump(c: &AtomicU64, n: u64) {
 fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
     // A panic while holding these short locks cannot leave the data
     // inconsistent (plain counters), so a poisoned lock is still usable.
-    m.lock().unwrap_or_else(|p| p.into_inner())
+    m.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
 }
 
 impl LinkStats {

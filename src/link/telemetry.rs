@@ -9,19 +9,19 @@
 //! (ts1 - now, off by the link latency). Without any TIMESYNC a sample is
 //! stamped with its arrival time.
 
+use crate::spatial::{LocalNed, Point};
 use nalgebra::{UnitQuaternion, Vector3};
-use serde::Serialize;
 use std::collections::VecDeque;
 
-/// The vehicle's pose at one time.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+/// The vehicle's pose at one time, in the autopilot's local NED.
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub struct VehiclePose {
     /// The time it is for, ns since the Unix epoch.
     pub time_ns: u64,
-    /// Body origin in local NED, metres.
-    pub position_ned_m: [f64; 3],
-    /// Attitude, body → NED, Hamilton w, x, y, z.
-    pub q_ned_body: [f64; 4],
+    /// Body origin, metres.
+    pub position_ned_m: Point<LocalNed>,
+    /// Attitude: body → NED.
+    pub q_ned_body: UnitQuaternion<f64>,
 }
 
 /// Most samples kept per stream (an autopilot streams at most ~50 Hz).
@@ -249,8 +249,8 @@ impl Telemetry {
         };
         Some(VehiclePose {
             time_ns: t,
-            position_ned_m: [p.x, p.y, p.z],
-            q_ned_body: crate::spatial::quaternion_to_wxyz(&q),
+            position_ned_m: Point::new(p),
+            q_ned_body: q,
         })
     }
 }
@@ -277,7 +277,8 @@ mod tests {
             assert!((got - want).abs() < 1e-9);
         }
         // Slerp of a pure yaw: a quarter of 0.2 rad about down.
-        let yaw = 2.0 * p.q_ned_body[3].atan2(p.q_ned_body[0]);
+        let q = crate::spatial::quaternion_to_wxyz(&p.q_ned_body);
+        let yaw = 2.0 * q[3].atan2(q[0]);
         assert!((yaw - 0.05).abs() < 1e-9, "{yaw}");
         // Held within the tolerance past the last sample, refused beyond.
         assert!(tm.pose_at(t0 + 150 * MS).is_some());
@@ -322,7 +323,7 @@ mod tests {
         tm.push_position(boot_ms, [1.0, 2.0, 3.0], 0);
         tm.push_attitude(boot_ms, [0.0, 0.0, 0.0], 0);
         let p = tm.pose_at(unix_of_boot).unwrap();
-        assert_eq!(p.position_ned_m, [1.0, 2.0, 3.0]);
+        assert_eq!(p.position_ned_m.to_array(), [1.0, 2.0, 3.0]);
     }
 
     #[test]

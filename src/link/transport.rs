@@ -153,8 +153,8 @@ impl Transport {
                 Some(p) => socket.send_to(bytes, *p).await.map(|_| true),
                 None => Ok(false),
             },
-            Self::Tcp(s) => s.write_all(bytes).await.map(|_| true),
-            Self::Serial(s) => s.write_all(bytes).await.map(|_| true),
+            Self::Tcp(s) => s.write_all(bytes).await.map(|()| true),
+            Self::Serial(s) => s.write_all(bytes).await.map(|()| true),
         }
     }
 }

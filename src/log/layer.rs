@@ -56,7 +56,7 @@ impl<S: Subscriber> Layer<S> for LogLayer {
     fn on_event(&self, event: &Event<'_>, _ctx: Context<'_, S>) {
         // The writer writes its own reports; looping them through the queue
         // could feed back on a failing disk.
-        if ON_WRITER_THREAD.with(|f| f.get()) {
+        if ON_WRITER_THREAD.with(std::cell::Cell::get) {
             return;
         }
         let meta = event.metadata();

@@ -17,29 +17,36 @@
 //! modes are JPEG ([`topics::jpeg`]) and full frames at a lower rate with a
 //! crop around the drogue on every frame ([`crop`]).
 //!
-//! Also here: start-up recovery and `recover` ([`recover`]), replay of
-//! `/camera/image` ([`replay`]) and the post-flight review ([`review`]).
+//! Also here: the `[log]` config ([`LogConfig`]), the message reader every
+//! reader of a log uses ([`reader`]), start-up recovery and `recover`
+//! ([`recover`]) and the post-flight review ([`review`]). Replay of
+//! `/camera/image` is a frame source: `crate::source::replay`.
 
+mod config;
 pub mod crop;
+mod error;
 mod layer;
 pub mod metadata;
 pub mod oversized;
 pub mod png_gray;
+pub mod reader;
 pub mod recover;
-pub mod replay;
 pub mod review;
 mod send_stamps;
-
 pub mod storage;
 pub mod topics;
 mod writer;
+
+pub use config::{ChunkCompression, ImageEncoding, LogConfig};
+pub(crate) use error::error_chain;
+pub use error::{LogError, check_mcap_input};
 
 use crate::camera::CameraModel;
 use crate::frame::Frame;
 use crate::link::LinkEvent;
 use crate::measure::Measurement;
 use crate::measure::mount::Mount;
-use serde::{Deserialize, Serialize};
+use serde::Serialize;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::mpsc::{self, SyncSender, TrySendError};
@@ -49,240 +56,6 @@ use std::thread::JoinHandle;
 pub use layer::LogLayer;
 pub use storage::{FileStorage, Storage, StorageFile};
 pub use topics::MountTransforms;
-
-/// How `/camera/image` stores the frames. `raw` and `png` are lossless and
-/// keep every frame, so a replay reproduces the logged detections exactly;
-/// `jpeg` and `crop` are the opt-in long-flight modes, which give that up
-/// (README, "Size").
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum ImageEncoding {
-    /// `foxglove.RawImage`, mono8: cheapest on the CPU.
-    Raw,
-    /// `foxglove.CompressedImage`, PNG ([`png_gray`]: Average filter,
-    /// Huffman-only deflate): under half the disk of raw on camera frames.
-    Png,
-    /// `foxglove.CompressedImage`, JPEG at `jpeg_quality`: lossy, every frame.
-    Jpeg,
-    /// PNG full frames every `full_frame_every`-th frame, and on every frame
-    /// a PNG crop around the drogue on `/camera/crop` ([`crop`]).
-    Crop,
-}
-
-impl ImageEncoding {
-    /// The schema of `/camera/image`.
-    pub fn is_compressed(self) -> bool {
-        self != ImageEncoding::Raw
-    }
-}
-
-/// Chunk compression of the MCAP file (the `mcap` crate's own codecs; every
-/// MCAP reader reads all three).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum ChunkCompression {
-    /// zstd: the usual choice of the mcap CLI, rosbag2 and Foxglove.
-    Zstd,
-    /// lz4: less CPU, less saving.
-    Lz4,
-    /// Uncompressed chunks.
-    None,
-}
-
-impl ChunkCompression {
-    /// The `mcap` crate's setting.
-    pub fn to_mcap(self) -> Option<mcap::Compression> {
-        match self {
-            ChunkCompression::Zstd => Some(mcap::Compression::Zstd),
-            ChunkCompression::Lz4 => Some(mcap::Compression::Lz4),
-            ChunkCompression::None => None,
-        }
-    }
-}
-
-/// `[log]` in the config (every key documented in `config/default.toml`).
-#[derive(Clone, Debug, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct LogConfig {
-    /// Log folder (the `run --log-dir` default).
-    pub dir: PathBuf,
-    /// File name prefix: `<prefix>_<UTC start>_<part>.mcap`.
-    pub file_prefix: String,
-    pub image_encoding: ImageEncoding,
-    /// JPEG quality of `image_encoding = "jpeg"` (1..=100).
-    pub jpeg_quality: u8,
-    /// `image_encoding = "crop"`: a full frame on `/camera/image` every this
-    /// many frames (by sequence number).
-    pub full_frame_every: u32,
-    /// `image_encoding = "crop"`: the crop's half-size over the canopy's
-    /// projected radius (1 = just the canopy).
-    pub crop_margin: f64,
-    /// `[drogue] canopy_radius_m / inner_radius_m`, set by the caller with
-    /// [`LogConfig::set_drogue`]: the crop mode scales the inner circle's
-    /// ellipse by it to cover the canopy. Not a config key.
-    #[serde(skip)]
-    pub canopy_ratio: Option<f64>,
-    /// Chunk compression.
-    pub compression: ChunkCompression,
-    /// Compression level (zstd 1..=19, lz4 0..=12; 0 is the codec's default).
-    pub compression_level: u32,
-    /// Start a new numbered file after this many MiB (0: never by size).
-    pub rotate_size_mib: u64,
-    /// Start a new numbered file after this many seconds (0: never by time).
-    pub rotate_duration_s: u64,
-    /// Items (frames, measurements, messages, events) the queue holds before
-    /// dropping new ones.
-    pub queue_len: usize,
-    /// Close the chunk and `sync_data` at least this often, milliseconds (1..=1000).
-    pub sync_interval_ms: u64,
-    /// Target chunk size, KiB (a chunk also ends at every sync).
-    pub chunk_size_kib: u64,
-    /// After a write error, wait this long before opening a new file, seconds.
-    pub retry_after_error_s: u64,
-    /// Recover cut-short files found in the log folder at start-up.
-    pub recover_on_start: bool,
-    /// Keep a recovered file's cut-short original as `<name>.mcap.cut`.
-    pub keep_cut_files: bool,
-}
-
-impl LogConfig {
-    /// Tells the crop mode the drogue's size (`[drogue]`, metres).
-    pub fn set_drogue(&mut self, inner_radius_m: f64, canopy_radius_m: f64) {
-        self.canopy_ratio = Some(canopy_radius_m / inner_radius_m);
-    }
-
-    /// Checks the values a writer relies on.
-    pub fn validate(&self) -> Result<(), LogError> {
-        let bad = |m: String| Err(LogError::Config(m));
-        if !(1..=100).contains(&self.jpeg_quality) {
-            return bad(format!(
-                "log.jpeg_quality must be 1..=100, got {}",
-                self.jpeg_quality
-            ));
-        }
-        if self.full_frame_every == 0 {
-            return bad("log.full_frame_every must be at least 1".into());
-        }
-        if !(1.0..=4.0).contains(&self.crop_margin) {
-            return bad(format!(
-                "log.crop_margin must be 1..=4, got {}",
-                self.crop_margin
-            ));
-        }
-        if self.image_encoding == ImageEncoding::Crop
-            && !self
-                .canopy_ratio
-                .is_some_and(|r| r.is_finite() && (1.0..=100.0).contains(&r))
-        {
-            return bad(format!(
-                "image_encoding = \"crop\" needs the drogue's size (LogConfig::set_drogue), got a canopy/inner ratio of {:?}",
-                self.canopy_ratio
-            ));
-        }
-        if self.queue_len == 0 {
-            return bad("log.queue_len must be at least 1".into());
-        }
-        if !(1..=1000).contains(&self.sync_interval_ms) {
-            return bad(format!(
-                "log.sync_interval_ms must be 1..=1000 (a crash may lose at most about a second), got {}",
-                self.sync_interval_ms
-            ));
-        }
-        let max_level = match self.compression {
-            ChunkCompression::Zstd => 19,
-            ChunkCompression::Lz4 => 12,
-            ChunkCompression::None => u32::MAX,
-        };
-        if self.compression_level > max_level {
-            return bad(format!(
-                "log.compression_level must be 0..={max_level} for {:?} compression, got {}",
-                self.compression, self.compression_level
-            ));
-        }
-        if self.chunk_size_kib == 0 {
-            return bad("log.chunk_size_kib must be at least 1".into());
-        }
-        if self.file_prefix.is_empty()
-            || self
-                .file_prefix
-                .chars()
-                .any(|c| !(c.is_ascii_alphanumeric() || c == '-' || c == '_'))
-        {
-            return bad(format!(
-                "log.file_prefix must be non-empty ASCII letters, digits, '-' or '_', got {:?}",
-                self.file_prefix
-            ));
-        }
-        Ok(())
-    }
-}
-
-/// Why the log could not be started, finished, recovered or read.
-#[derive(Debug, thiserror::Error)]
-pub enum LogError {
-    #[error("log config: {0}")]
-    Config(String),
-    #[error("{path}: {message}")]
-    Io { path: PathBuf, message: String },
-    #[error("{path}: not a readable MCAP log: {message}")]
-    Format { path: PathBuf, message: String },
-    #[error("log writer: {0}")]
-    Writer(String),
-    /// `recover` would have written less than the input holds.
-    #[error("refused: {0}")]
-    Refused(String),
-}
-
-impl LogError {
-    pub(crate) fn io(path: &Path, e: impl std::fmt::Display) -> Self {
-        LogError::Io {
-            path: path.to_path_buf(),
-            message: e.to_string(),
-        }
-    }
-    pub(crate) fn format(path: &Path, e: impl std::fmt::Display) -> Self {
-        LogError::Format {
-            path: path.to_path_buf(),
-            message: e.to_string(),
-        }
-    }
-}
-
-/// Checks that `path` is a file starting with the MCAP magic, before a
-/// command creates anything: a missing, unreadable or foreign input is
-/// [`LogError::Format`] (exit status 2), and nothing is left behind.
-pub fn check_mcap_input(path: &Path) -> Result<(), LogError> {
-    use std::io::Read;
-    let not_readable = |why: String| Err(LogError::format(path, why));
-    if path.is_dir() {
-        return not_readable("a folder, not a file".into());
-    }
-    let mut file = match std::fs::File::open(path) {
-        Ok(f) => f,
-        Err(e) => return not_readable(format!("cannot open it: {e}")),
-    };
-    let mut magic = [0u8; 8];
-    if file.read_exact(&mut magic).is_err() || magic.as_slice() != mcap::MAGIC {
-        return not_readable("no MCAP magic at the start".into());
-    }
-    Ok(())
-}
-
-/// An error with its causes ("I/O error: No space left on device"): the
-/// `mcap` crate's errors hide the io::Error in `source()`.
-pub(crate) fn error_chain(e: &dyn std::error::Error) -> String {
-    let mut text = e.to_string();
-    let mut cause = e.source();
-    while let Some(c) = cause {
-        let c_text = c.to_string();
-        if !text.contains(&c_text) {
-            text.push_str(": ");
-            text.push_str(&c_text);
-        }
-        cause = c.source();
-    }
-    text
-}
 
 /// What a finished log wrote.
 #[derive(Clone, Debug, Default, PartialEq, Serialize)]
@@ -356,7 +129,7 @@ impl Counters {
     pub fn now_ns(&self) -> u64 {
         self.clock
             .read()
-            .unwrap_or_else(|p| p.into_inner())
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
             .now_ns()
     }
 }
@@ -484,7 +257,7 @@ impl LogHandle {
         } else {
             match self.shared.tx.try_send(item) {
                 Ok(()) => true,
-                Err(TrySendError::Full(_)) | Err(TrySendError::Disconnected(_)) => false,
+                Err(TrySendError::Full(_) | TrySendError::Disconnected(_)) => false,
             }
         };
         if !sent {
@@ -502,7 +275,7 @@ impl LogHandle {
             .counters
             .clock
             .write()
-            .unwrap_or_else(|p| p.into_inner()) = clock;
+            .unwrap_or_else(std::sync::PoisonError::into_inner) = clock;
     }
 
     /// Wait for room in the queue instead of dropping (`run --fast`: nothing

@@ -40,10 +40,15 @@
 //! are still checked).
 
 use mcap::records::op;
-use std::collections::VecDeque;
-use std::io::{self, BufReader, Read, Seek, SeekFrom, Take, Write};
+use std::io::{self, Read, Seek, SeekFrom};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
+
+mod chunk;
+mod filtered;
+
+pub(crate) use chunk::{ChunkContent, walk_chunk};
+use filtered::Filtered;
 
 /// Largest record the reader accepts: a raw mono8 frame of 5792x5792, far
 /// above any camera this runs with. A top-level record above it that fits
@@ -98,206 +103,6 @@ enum State {
     /// After the footer, a cut or a length the reader is to report: all
     /// the rest as it is.
     Rest,
-}
-
-/// A chunk's compressed records being decompressed (or, uncompressed,
-/// passed through) from `R`.
-pub(crate) enum ChunkContent<R: Read> {
-    Plain(Take<R>),
-    Zstd(Box<zstd::stream::read::Decoder<'static, BufReader<Take<R>>>>),
-    Lz4(Box<lz4::Decoder<Take<R>>>),
-}
-
-impl<R: Read> ChunkContent<R> {
-    /// The content of a chunk compressed with `compression` (its MCAP
-    /// name) whose `compressed` bytes `r` is at. None: a compression this
-    /// build does not read.
-    pub(crate) fn new(compression: &str, r: R, compressed: u64) -> io::Result<Option<Self>> {
-        let r = r.take(compressed);
-        Ok(Some(match compression {
-            "" => Self::Plain(r),
-            "zstd" => Self::Zstd(Box::new(zstd::stream::read::Decoder::new(r)?)),
-            "lz4" => Self::Lz4(Box::new(lz4::Decoder::new(r)?)),
-            _ => return Ok(None),
-        }))
-    }
-
-    /// The reader back (its position anywhere within the chunk).
-    fn into_inner(self) -> R {
-        match self {
-            Self::Plain(r) => r.into_inner(),
-            Self::Zstd(d) => d.into_inner().into_inner().into_inner(),
-            Self::Lz4(d) => d.finish().0.into_inner(),
-        }
-    }
-}
-
-impl<R: Read> Read for ChunkContent<R> {
-    fn read(&mut self, buf: &mut [u8]) -> io::Result<usize> {
-        match self {
-            Self::Plain(r) => r.read(buf),
-            Self::Zstd(d) => d.read(buf),
-            Self::Lz4(d) => d.read(buf),
-        }
-    }
-}
-
-/// What [`walk_chunk`] found in a chunk's content.
-#[derive(Debug, Default)]
-pub(crate) struct ChunkWalk {
-    /// Records above the bound: (offset of the record head in the content,
-    /// bytes with the head), in order.
-    pub oversized: Vec<(u64, u64)>,
-    /// Their body bytes.
-    pub oversized_bytes: u64,
-    /// Content bytes read.
-    pub len: u64,
-    /// CRC-32 of all the content read, and of the content less the records
-    /// above the bound.
-    pub crc: u32,
-    pub kept_crc: u32,
-    /// Why the walk stopped before the end of the content, or why the
-    /// content is not what the header says (its size, its CRC).
-    pub problem: Option<String>,
-}
-
-/// What [`walk_chunk`] hands each record within the bound to: (opcode,
-/// body).
-pub(crate) type RecordFn<'a, E> = &'a mut dyn FnMut(u8, &[u8]) -> Result<(), E>;
-
-/// Walks the records of a chunk's content (decompressed) in `content`,
-/// streaming: a record above [`RECORD_LIMIT_BYTES`] is read and dropped in
-/// small pieces, never held; each other record is handed to `each` (read
-/// into memory, within the bound) or, without `each`, dropped the same way.
-/// `size` and `crc` are the chunk header's uncompressed size and CRC (0:
-/// none). Stops at the first problem (noted in the result); an error of
-/// `each` ends it with that error.
-pub(crate) fn walk_chunk<E>(
-    content: impl Read,
-    size: u64,
-    crc: u32,
-    mut each: Option<RecordFn<'_, E>>,
-) -> Result<ChunkWalk, E> {
-    let mut r = Hashing {
-        inner: content.take(size),
-        hasher: crc32fast::Hasher::new(),
-        read: 0,
-    };
-    let mut kept = crc32fast::Hasher::new();
-    let mut walk = ChunkWalk::default();
-    let problem = loop {
-        let at = r.read;
-        let mut head = [0u8; 9];
-        match read_up_to(&mut r, &mut head) {
-            Ok(0) => break None,
-            Ok(9) => {}
-            Ok(_) => {
-                break Some(format!(
-                    "a record head is cut off at byte {at} of its records"
-                ));
-            }
-            Err(e) => break Some(format!("does not decompress: {e}")),
-        }
-        let (opcode, len) = (head[0], u64_at(&head, 1));
-        if len > size - r.read {
-            break Some(format!(
-                "the record at byte {at} of its records claims {len} bytes, {} remain",
-                size - r.read
-            ));
-        }
-        if len > RECORD_LIMIT_BYTES as u64 {
-            match io::copy(&mut (&mut r).take(len), &mut io::sink()) {
-                Ok(n) if n == len => {}
-                Ok(_) => break Some(format!("its records end inside the record at byte {at}")),
-                Err(e) => break Some(format!("does not decompress: {e}")),
-            }
-            walk.oversized.push((at, 9 + len));
-            walk.oversized_bytes += len;
-            continue;
-        }
-        kept.update(&head);
-        let got = match each.as_mut() {
-            Some(each) => {
-                let mut body = vec![0u8; len as usize];
-                match r.read_exact(&mut body) {
-                    Ok(()) => {
-                        kept.update(&body);
-                        each(opcode, &body)?;
-                        Ok(len)
-                    }
-                    Err(e) => Err(e),
-                }
-            }
-            None => io::copy(&mut (&mut r).take(len), &mut HashSink { hasher: &mut kept }),
-        };
-        match got {
-            Ok(n) if n == len => {}
-            Ok(_) => break Some(format!("its records end inside the record at byte {at}")),
-            Err(e) if e.kind() == io::ErrorKind::UnexpectedEof => {
-                break Some(format!("its records end inside the record at byte {at}"));
-            }
-            Err(e) => break Some(format!("does not decompress: {e}")),
-        }
-    };
-    walk.len = r.read;
-    walk.crc = r.hasher.finalize();
-    walk.kept_crc = kept.finalize();
-    walk.problem = problem.or_else(|| {
-        if walk.len != size {
-            Some(format!(
-                "decompresses to {} bytes, its header says {size}",
-                walk.len
-            ))
-        } else if crc != 0 && walk.crc != crc {
-            Some(format!("CRC {:08X}, its header says {crc:08X}", walk.crc))
-        } else {
-            None
-        }
-    });
-    Ok(walk)
-}
-
-/// A reader that hashes and counts what it hands out.
-struct Hashing<R> {
-    inner: R,
-    hasher: crc32fast::Hasher,
-    read: u64,
-}
-
-impl<R: Read> Read for Hashing<R> {
-    fn read(&mut self, buf: &mut [u8]) -> io::Result<usize> {
-        let n = self.inner.read(buf)?;
-        self.hasher.update(&buf[..n]);
-        self.read += n as u64;
-        Ok(n)
-    }
-}
-
-/// A sink that only hashes.
-struct HashSink<'a> {
-    hasher: &'a mut crc32fast::Hasher,
-}
-
-impl Write for HashSink<'_> {
-    fn write(&mut self, buf: &[u8]) -> io::Result<usize> {
-        self.hasher.update(buf);
-        Ok(buf.len())
-    }
-    fn flush(&mut self) -> io::Result<()> {
-        Ok(())
-    }
-}
-
-/// A chunk handed out less its records above the bound.
-struct Filtered<R: Read> {
-    content: ChunkContent<R>,
-    /// Content bytes read from `content` so far, and in all.
-    at: u64,
-    len: u64,
-    /// The records to drop: (content offset, bytes), in order.
-    drop: VecDeque<(u64, u64)>,
-    /// Where the chunk ends in the file.
-    end: u64,
 }
 
 /// A reader of an MCAP file that leaves out records above
@@ -474,118 +279,6 @@ impl<R: Read + Seek> SkipOversized<R> {
             then: After::Inner { records, tail },
         };
         Ok(())
-    }
-
-    /// At the compressed records (`compressed` bytes of the `data` bytes
-    /// left in the chunk) of a chunk whose head and header are in
-    /// `pending`: walks them once; when they hold records above the bound
-    /// and are otherwise sound, rewrites the head and header in `pending`
-    /// as those of an uncompressed chunk of the other records and starts
-    /// handing those out. Returns whether it did; if not, the file is where
-    /// it was.
-    fn filter(&mut self, compression: &str, compressed: u64, data: u64) -> io::Result<bool> {
-        let start = self.len - self.remaining;
-        let size = u64_at(&self.pending, 9 + 16);
-        let crc = u32_at(&self.pending, 9 + 24);
-        let walk = match ChunkContent::new(compression, self.inner()?, compressed) {
-            Ok(Some(content)) => walk_chunk::<std::convert::Infallible>(content, size, crc, None)
-                .unwrap_or_else(|e| match e {}),
-            // An unknown compression, or no decoder: the reader reports it.
-            Ok(None) | Err(_) => return Ok(false),
-        };
-        self.inner()?.seek(SeekFrom::Start(start))?;
-        if walk.problem.is_some() || walk.oversized.is_empty() {
-            return Ok(false);
-        }
-        let Some(file) = self.inner.take() else {
-            return Ok(false);
-        };
-        let content = match ChunkContent::new(compression, file, compressed) {
-            Ok(Some(c)) => c,
-            _ => {
-                return Err(io::Error::other(
-                    "a chunk's decoder could not be made a second time",
-                ));
-            }
-        };
-        let dropped: u64 = walk.oversized.iter().map(|&(_, n)| n).sum();
-        let kept = size - dropped;
-        // The head and header of an uncompressed chunk of `kept` bytes of
-        // records: its start and end times stay.
-        let times: [u8; 16] = self.pending[9..25].try_into().unwrap_or([0; 16]);
-        self.pending.clear();
-        self.pending_at = 0;
-        self.pending.push(op::CHUNK);
-        self.pending
-            .extend_from_slice(&(CHUNK_FIXED as u64 + 8 + kept).to_le_bytes());
-        self.pending.extend_from_slice(&times);
-        self.pending.extend_from_slice(&kept.to_le_bytes());
-        let kept_crc = if crc == 0 { 0 } else { walk.kept_crc };
-        self.pending.extend_from_slice(&kept_crc.to_le_bytes());
-        self.pending.extend_from_slice(&0u32.to_le_bytes());
-        self.pending.extend_from_slice(&kept.to_le_bytes());
-        self.skipped
-            .records
-            .fetch_add(walk.oversized.len() as u64, Ordering::Relaxed);
-        self.skipped
-            .bytes
-            .fetch_add(walk.oversized_bytes, Ordering::Relaxed);
-        self.filtered = Some(Filtered {
-            content,
-            at: 0,
-            len: size,
-            drop: walk.oversized.into(),
-            end: start + data,
-        });
-        self.state = State::Filtered;
-        Ok(true)
-    }
-
-    /// Hands out the next bytes of a filtered chunk; at its end, takes the
-    /// file back and goes on after the chunk.
-    fn read_filtered(&mut self, buf: &mut [u8]) -> io::Result<Option<usize>> {
-        let Some(f) = self.filtered.as_mut() else {
-            self.state = State::Rest;
-            return Ok(None);
-        };
-        loop {
-            let next_drop = f.drop.front().copied();
-            if let Some((at, n)) = next_drop
-                && at == f.at
-            {
-                let got = io::copy(&mut (&mut f.content).take(n), &mut io::sink())?;
-                if got < n {
-                    return Err(changed());
-                }
-                f.at += n;
-                f.drop.pop_front();
-                continue;
-            }
-            let until = next_drop.map_or(f.len, |(at, _)| at);
-            if f.at == until {
-                break;
-            }
-            let n = usize::try_from(until - f.at)
-                .unwrap_or(usize::MAX)
-                .min(buf.len());
-            let got = f.content.read(&mut buf[..n])?;
-            if got == 0 {
-                return Err(changed());
-            }
-            f.at += got as u64;
-            return Ok(Some(got));
-        }
-        // The chunk's end: the file back, after the chunk.
-        let Some(f) = self.filtered.take() else {
-            return Ok(None);
-        };
-        let mut file = f.content.into_inner();
-        file.seek(SeekFrom::Start(f.end))?;
-        self.remaining = self.len.saturating_sub(f.end);
-        self.inner = Some(file);
-        self.state = State::Head;
-        self.step()?;
-        Ok(None)
     }
 
     /// The next record inside an uncompressed chunk: its head is read ahead
@@ -820,7 +513,7 @@ mod tests {
         file.extend(plain_chunk(&record(op::MESSAGE, &[2; 40])[..20]));
         file.extend(record(op::MESSAGE, &[3; 64]));
         let source = SkipOversized::new(Cursor::new(file.clone()), file.len() as u64);
-        let opts = super::super::recover::reader_options();
+        let opts = super::super::reader::reader_options();
         let got: Vec<_> = mcap::io::MessageReader::new_with_options(source, opts).collect();
         assert_eq!(got.len(), 1);
         assert!(got[0].is_err());
@@ -897,7 +590,7 @@ mod tests {
     /// (opcode, length) of every record the `mcap` crate's linear reader
     /// reads from `source` (into chunks, CRCs checked), or its first error.
     fn records_read(mut source: impl Read) -> Result<Vec<(u8, usize)>, mcap::McapError> {
-        let opts = super::super::recover::reader_options()
+        let opts = super::super::reader::reader_options()
             .with_skip_end_magic(true)
             .with_prevalidate_chunk_crcs(false);
         let mut reader = mcap::sans_io::LinearReader::new_with_options(opts);

@@ -475,8 +475,7 @@ mod tests {
 
     #[test]
     fn calibration_round_trips_the_camera() {
-        let k = Matrix3::new(1336.2, 0.0, 646.3, 0.0, 1335.4, 473.8, 0.0, 0.0, 1.0);
-        let cam = CameraModel::new("c", 1280, 960, k, [0.1, -0.2, 0.001, 0.002, 0.03]).unwrap();
+        let cam = crate::testing::paper_camera([0.1, -0.2, 0.001, 0.002, 0.03]);
         let back = camera_from_calibration(&calibration(&cam, 5)).unwrap();
         assert_eq!(back.k, cam.k);
         assert_eq!(back.distortion, cam.distortion);

@@ -439,17 +439,13 @@ fn support_on(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::spatial::{Direction, Point};
+    use crate::testing::vga_camera;
     use image::Luma;
-    use nalgebra::Matrix3;
     use nalgebra::Vector3;
 
     fn camera() -> CameraModel {
-        lens([0.0; 5])
-    }
-
-    fn lens(distortion: [f64; 5]) -> CameraModel {
-        let k = Matrix3::new(800.0, 0.0, 320.0, 0.0, 800.0, 240.0, 0.0, 0.0, 1.0);
-        CameraModel::new("t", 640, 480, k, distortion).unwrap()
+        vga_camera([0.0; 5])
     }
 
     /// Paints a synthetic drogue, exact per pixel centre: sky 170, canopy 150,
@@ -464,7 +460,7 @@ mod tests {
         GrayImage::from_fn(640, 480, |x, y| {
             let ray = cam.ray_camera(cam.undistort_px([f64::from(x), f64::from(y)]));
             let t = n.dot(&pose.centre_camera_m) / n.dot(&ray);
-            let r = (ray * t - pose.centre_camera_m).norm();
+            let r = (ray * t - *pose.centre_camera_m).norm();
             let g = if r < 0.15 {
                 levels[0]
             } else if r < 0.30 {
@@ -487,11 +483,11 @@ mod tests {
         let cam = camera();
         let n = nalgebra::Rotation3::new(Vector3::new(0.0, 0.6, 0.2)) * -Vector3::z();
         let truth = CirclePose {
-            centre_camera_m: Vector3::new(0.1, -0.05, 3.0),
-            normal_camera: n.normalize(),
+            centre_camera_m: Point::new(Vector3::new(0.1, -0.05, 3.0)),
+            normal_camera: Direction::new(n.normalize()),
         };
         let mirrored = CirclePose {
-            normal_camera: Vector3::new(-n.x, -n.y, n.z).normalize(),
+            normal_camera: Direction::new(Vector3::new(-n.x, -n.y, n.z).normalize()),
             ..truth
         };
         let image = render_levels(&cam, &truth, [110, 180, 150, 130]);
@@ -514,7 +510,7 @@ mod tests {
         // Strong barrel distortion: an undistorted prediction would miss.
         // Off-centre, where it moves the rim by several pixels.
         support_through(
-            &lens([-0.3, 0.1, 0.001, -0.001, 0.0]),
+            &vga_camera([-0.3, 0.1, 0.001, -0.001, 0.0]),
             Vector3::new(0.6, 0.4, 3.0),
         );
     }
@@ -523,15 +519,15 @@ mod tests {
         let cam = cam.clone();
         let n = nalgebra::Rotation3::new(Vector3::new(0.0, 0.6, 0.2)) * -Vector3::z();
         let truth = CirclePose {
-            centre_camera_m,
-            normal_camera: n.normalize(),
+            centre_camera_m: Point::new(centre_camera_m),
+            normal_camera: Direction::new(n.normalize()),
         };
         let image = render(&cam, &truth);
         let good = canopy_support(&image, &cam, &truth, 0.33).unwrap();
         assert!(good > 0.95, "true pose support {good}");
         // A pose with the same centre and a mirrored tilt.
         let mirrored = CirclePose {
-            normal_camera: Vector3::new(-n.x, -n.y, n.z).normalize(),
+            normal_camera: Direction::new(Vector3::new(-n.x, -n.y, n.z).normalize()),
             ..truth
         };
         let bad = canopy_support(&image, &cam, &mirrored, 0.33).unwrap();
@@ -547,11 +543,11 @@ mod tests {
         let n =
             (nalgebra::Rotation3::new(Vector3::new(0.0, 0.35, 0.0)) * -Vector3::z()).normalize();
         let truth = CirclePose {
-            centre_camera_m: Vector3::new(0.0, 0.0, range_m),
-            normal_camera: n,
+            centre_camera_m: Point::new(Vector3::new(0.0, 0.0, range_m)),
+            normal_camera: Direction::new(n),
         };
         let mirror = CirclePose {
-            normal_camera: Vector3::new(-n.x, -n.y, n.z),
+            normal_camera: Direction::new(Vector3::new(-n.x, -n.y, n.z)),
             ..truth
         };
         [truth, mirror]
@@ -603,20 +599,20 @@ mod tests {
     fn rim_outside_the_image_cannot_be_judged() {
         let cam = camera();
         let pose = CirclePose {
-            centre_camera_m: Vector3::new(0.0, 0.0, 0.3),
-            normal_camera: -Vector3::z(),
+            centre_camera_m: Point::new(Vector3::new(0.0, 0.0, 0.3)),
+            normal_camera: Direction::new(-Vector3::z()),
         };
         let image = GrayImage::new(640, 480);
         assert_eq!(canopy_support(&image, &cam, &pose, 0.33), None);
         // Far away the rim is a few pixels: no judgement either.
         let far = CirclePose {
-            centre_camera_m: Vector3::new(0.0, 0.0, 200.0),
+            centre_camera_m: Point::new(Vector3::new(0.0, 0.0, 200.0)),
             ..pose
         };
         assert_eq!(canopy_support(&image, &cam, &far, 0.33), None);
         // A blank image gives no support at all.
         let near = CirclePose {
-            centre_camera_m: Vector3::new(0.0, 0.0, 3.0),
+            centre_camera_m: Point::new(Vector3::new(0.0, 0.0, 3.0)),
             ..pose
         };
         assert_eq!(canopy_support(&image, &cam, &near, 0.33), Some(0.0));

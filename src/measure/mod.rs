@@ -286,10 +286,8 @@ impl Measurer {
             let normal_sigma_rad = uncertainty.normal_sigma_rad;
             let position_body_m = self
                 .mount
-                .point_camera_to_body(&Point::new(choice.pose.centre_camera_m));
-            let normal_body = self
-                .mount
-                .vector_camera_to_body(&Direction::new(choice.pose.normal_camera));
+                .point_camera_to_body(&choice.pose.centre_camera_m);
+            let normal_body = self.mount.vector_camera_to_body(&choice.pose.normal_camera);
             let position_cov_body_m2 = self.mount.covariance_camera_to_body(&cov_camera);
             times.pose_us = micros_since(t);
             tracing::debug!(

@@ -29,15 +29,16 @@
 use super::FitQuality;
 use super::ellipse::Ellipse;
 use crate::camera::CameraModel;
+use crate::spatial::{Camera, Direction, Point};
 use nalgebra::{Matrix2, Matrix3, SMatrix, SVector, Vector2, Vector3};
 
 /// A circle's pose in the camera frame.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct CirclePose {
-    /// Circle centre, camera frame, metres.
-    pub centre_camera_m: Vector3<f64>,
-    /// Unit normal of the circle's plane, camera frame, pointing toward the camera.
-    pub normal_camera: Vector3<f64>,
+    /// Circle centre, metres.
+    pub centre_camera_m: Point<Camera>,
+    /// Unit normal of the circle's plane, pointing toward the camera.
+    pub normal_camera: Direction<Camera>,
 }
 
 /// Two unit vectors spanning the plane of a circle with unit-ish normal `n`
@@ -220,8 +221,10 @@ fn cone_pose_parts(
     // enter: F' and n' have no x'-component.)
     let rot = Matrix3::from_columns(&[x_v, y_v, z_v]);
     let solution = |sign: f64| CirclePose {
-        centre_camera_m: rot * Vector3::new(0.0, sign * centre_y, centre_z),
-        normal_camera: (rot * Vector3::new(0.0, sign * normal_y, normal_z)).normalize(),
+        centre_camera_m: Point::new(rot * Vector3::new(0.0, sign * centre_y, centre_z)),
+        normal_camera: Direction::new(
+            (rot * Vector3::new(0.0, sign * normal_y, normal_z)).normalize(),
+        ),
     };
     let both = [solution(1.0), solution(-1.0)];
     let finite = both.iter().all(|p| {

@@ -288,13 +288,13 @@ impl Tracker {
             self.normals.pop_front();
         }
         self.normals
-            .push_back((capture_time_ns, pose.normal_camera));
+            .push_back((capture_time_ns, *pose.normal_camera));
         self.track = Some(TrackState {
             time_ns: capture_time_ns,
             ellipse: params,
             velocity_per_s,
-            normal_camera: pose.normal_camera,
-            centre_camera_m: pose.centre_camera_m,
+            normal_camera: *pose.normal_camera,
+            centre_camera_m: *pose.centre_camera_m,
             resolved: how != Disambiguation::Unresolved,
         });
         Choice {
@@ -325,6 +325,7 @@ impl Tracker {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::spatial::{Direction, Point};
 
     const MS: u64 = 1_000_000;
 
@@ -341,8 +342,8 @@ mod tests {
 
     fn pose(nx: f64) -> CirclePose {
         CirclePose {
-            centre_camera_m: Vector3::new(0.0, 0.0, 5.0),
-            normal_camera: Vector3::new(nx, 0.0, -1.0).normalize(),
+            centre_camera_m: Point::new(Vector3::new(0.0, 0.0, 5.0)),
+            normal_camera: Direction::new(Vector3::new(nx, 0.0, -1.0).normalize()),
         }
     }
 
@@ -467,7 +468,7 @@ mod tests {
 
     fn pose_at(nx: f64, centre: [f64; 3]) -> CirclePose {
         CirclePose {
-            centre_camera_m: Vector3::new(centre[0], centre[1], centre[2]),
+            centre_camera_m: Point::new(Vector3::new(centre[0], centre[1], centre[2])),
             ..pose(nx)
         }
     }

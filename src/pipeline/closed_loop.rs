@@ -6,6 +6,7 @@ use crate::link::{LinkHandle, VehiclePose};
 use crate::source::SourceItem;
 use crate::source::dir::unix_now_ns;
 use crate::source::sim::{AutopilotAnchor, SimSource, SitlAnchor};
+use crate::spatial::quaternion_to_wxyz;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
@@ -112,8 +113,8 @@ impl ClosedLoop {
         };
         self.sim.next_frame_from_autopilot(
             anchor,
-            pose.position_ned_m,
-            pose.q_ned_body,
+            pose.position_ned_m.to_array(),
+            quaternion_to_wxyz(&pose.q_ned_body),
             capture_time_ns,
         )
     }
@@ -124,8 +125,8 @@ impl ClosedLoop {
         let anchor = AutopilotAnchor::new(
             self.sim.simulator().scenario(),
             self.mode,
-            pose.position_ned_m,
-            pose.q_ned_body,
+            pose.position_ned_m.to_array(),
+            quaternion_to_wxyz(&pose.q_ned_body),
         )?;
         tracing::info!(
             mode = ?self.mode,

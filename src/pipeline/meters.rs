@@ -120,9 +120,7 @@ impl Reading {
     fn now(meters: &PipelineMeters, log: &LogHandle) -> Self {
         Self {
             wall: Instant::now(),
-            process_cpu_ns: ProcessTime::try_now()
-                .map(|t| t.as_duration().as_nanos() as u64)
-                .unwrap_or(0),
+            process_cpu_ns: ProcessTime::try_now().map_or(0, |t| t.as_duration().as_nanos() as u64),
             source_cpu_ns: meters.source_cpu_ns.load(Ordering::Relaxed),
             measure_cpu_ns: meters.measure_cpu_ns.load(Ordering::Relaxed),
             log_writer_cpu_ns: log.writer_cpu_ns(),
@@ -242,11 +240,13 @@ impl StatsThread {
             .name("run-stats".into())
             .spawn(move || {
                 let (lock, cvar) = &*stop_flag;
-                let mut stopped = lock.lock().unwrap_or_else(|p| p.into_inner());
+                let mut stopped = lock
+                    .lock()
+                    .unwrap_or_else(std::sync::PoisonError::into_inner);
                 loop {
                     let (guard, _) = cvar
                         .wait_timeout_while(stopped, STATS_PERIOD, |s| !*s)
-                        .unwrap_or_else(|p| p.into_inner());
+                        .unwrap_or_else(std::sync::PoisonError::into_inner);
                     stopped = guard;
                     // The last, partial interval is sampled too.
                     sampler.sample();
@@ -265,7 +265,9 @@ impl StatsThread {
     /// Takes a last sample and returns the run's figures.
     pub fn finish(mut self) -> ResourceSummary {
         let (lock, cvar) = &*self.stop;
-        *lock.lock().unwrap_or_else(|p| p.into_inner()) = true;
+        *lock
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner) = true;
         cvar.notify_all();
         self.handle
             .take()

@@ -28,6 +28,8 @@ pub fn colour_allowed() -> bool {
 
 /// Bytes of this run's MCAP files so far: the `.mcap` files of `dir`
 /// written since `since` (leftovers recovered at start-up excluded).
+// The log writer names its files `.mcap`: only ours are counted.
+#[allow(clippy::case_sensitive_file_extension_comparisons)]
 fn log_bytes(dir: &PathBuf, since: SystemTime) -> u64 {
     let Ok(entries) = std::fs::read_dir(dir) else {
         return 0;

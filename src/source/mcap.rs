@@ -1,8 +1,8 @@
 //! `mcap:` source: the `/camera/image` frames of a flight log, for replay.
 
+use super::replay::{self, ReplayReader};
 use super::{Captured, FrameSource, SourceError, SourceItem};
 use crate::camera::CameraModel;
-use crate::log::replay::{self, ReplayReader};
 use crate::measure::mount::MountConfig;
 use std::path::Path;
 

@@ -3,6 +3,7 @@
 
 pub mod dir;
 pub mod mcap;
+pub mod replay;
 pub mod sim;
 pub mod v4l;
 

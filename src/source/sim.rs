@@ -212,8 +212,7 @@ impl AutopilotAnchor {
         let p = r * (Vector3::from(position_autopilot_m) - Vector3::from(self.origin_autopilot_m))
             + self.moved_origin_world(t_s);
         let q = quaternion_from_wxyz(q_autopilot_body)
-            .map(|q| quaternion_to_wxyz(&(r * q)))
-            .unwrap_or([0.0; 4]);
+            .map_or([0.0; 4], |q| quaternion_to_wxyz(&(r * q)));
         (p.into(), q)
     }
 

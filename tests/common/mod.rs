@@ -75,7 +75,7 @@ pub fn errors(m: &Measurement, t: &Truth) -> Option<FrameErrors> {
         centre_px: ((e.cx - te.cx).powi(2) + (e.cy - te.cy).powi(2)).sqrt(),
         axes_px: (e.a - te.a).abs().max((e.b - te.b).abs()),
         theta_deg: (te.a / te.b > 1.05).then(|| e.theta_error_rad(&te).to_degrees()),
-        position_rel: (d.pose_camera.centre_camera_m - tp).norm() / range,
+        position_rel: (*d.pose_camera.centre_camera_m - tp).norm() / range,
         normal_deg: angle_deg(&d.pose_camera.normal_camera, &tn),
         range_m: range,
     })

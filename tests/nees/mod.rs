@@ -173,7 +173,7 @@ impl SetNees {
         } else {
             true_centre_camera
         };
-        let e_camera = d.pose_camera.centre_camera_m - centre;
+        let e_camera = *d.pose_camera.centre_camera_m - centre;
         let range = true_centre_camera.norm();
         if e_camera.norm() > GROSS_POSITION_REL * range {
             self.gross += 1;

@@ -147,7 +147,7 @@ fn score(stats: &mut LevelStats, m: &Measurement, truth: Option<&DrogueTruth>) {
         v3(t.normal_camera),
         v3(t.alt_normal_camera),
     );
-    let position_rel = (d.pose_camera.centre_camera_m - tp).norm() / t.range_m;
+    let position_rel = (*d.pose_camera.centre_camera_m - tp).norm() / t.range_m;
     let normal_deg = angle_deg(&d.pose_camera.normal_camera, &tn);
     match d.disambiguation {
         Disambiguation::CanopyRim => {

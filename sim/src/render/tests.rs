@@ -3,6 +3,10 @@
 //! spans, cached fragments, strut climbing and precomputed blur taps), and
 //! the float to byte conversions against Rust's own casts.
 
+use super::drogue::nearest_strut;
+use super::sensor::{dn_to_u8, floor_dn};
+use super::sky::floor_f64;
+use super::tube::TubeAxis;
 use super::*;
 use crate::{Scenario, Simulator};
 

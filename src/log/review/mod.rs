@@ -3,20 +3,21 @@
 //! per-range sums, and a plot series thinned by halving when it grows).
 
 mod plots;
+mod records;
+mod report;
 mod stats;
 
-use super::oversized::RECORD_LIMIT_BYTES;
-use super::recover::{counted_message_reader, is_cut_short};
+use super::reader::{counted_message_reader, is_cut_short};
 use super::{LogError, topics};
 use foxglove::Decode;
 use foxglove::messages::Log;
-use serde::Deserialize;
 use std::collections::{BTreeMap, VecDeque};
-use std::fmt;
 use std::fs::File;
 use std::io::{BufWriter, Write};
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
+use records::{CpuTotalLite, DetectionLite, LinkLite, StatsLite, TruthLite};
+pub use report::{ResourceReview, ReviewReport};
 pub use stats::{Histogram, RangeBin};
 
 /// Heartbeat gap that counts as the autopilot link lost, ns.
@@ -27,89 +28,6 @@ const MAX_PLOT_POINTS: usize = 50_000;
 const QUOTED_PROBLEMS: usize = 10;
 /// Truth records waiting for their detection (normally one).
 const MAX_PENDING_TRUTH: usize = 256;
-
-/// The fields of `/drogue/detection` the review reads.
-#[derive(Deserialize)]
-struct DetectionLite {
-    detected: bool,
-    position_camera: Option<[f64; 3]>,
-    normal_camera: Option<[f64; 3]>,
-    position_body: Option<[f64; 3]>,
-    times_us: Option<TimesLite>,
-}
-
-#[derive(Deserialize)]
-struct TimesLite {
-    total_us: f64,
-}
-
-/// The fields of `/sim/truth` the review reads.
-#[derive(Deserialize, Clone, Copy)]
-struct TruthLite {
-    position_camera: [f64; 3],
-    normal_camera: [f64; 3],
-    range_m: f64,
-    /// Absent in logs of older simulators.
-    position_body: Option<[f64; 3]>,
-}
-
-#[derive(Deserialize)]
-struct LinkLite {
-    name: String,
-    /// When the message went out, ns since the Unix epoch.
-    time_ns: Option<u64>,
-    /// Capture time of the frame a pose message was built from.
-    capture_time_ns: Option<u64>,
-}
-
-/// The fields of `/drogue/stats` the review reads.
-#[derive(Deserialize)]
-struct StatsLite {
-    time_ns: u64,
-    cpu_pct: CpuPctLite,
-    cpu_s_total: CpuTotalLite,
-    rss_bytes: Option<u64>,
-    queues: QueuesLite,
-}
-
-#[derive(Deserialize)]
-struct CpuPctLite {
-    pipeline: f64,
-}
-
-#[derive(Deserialize, Clone, Copy)]
-struct CpuTotalLite {
-    process: f64,
-    source: f64,
-    /// Absent in logs written before the writer's CPU was measured.
-    #[serde(default)]
-    log_writer: f64,
-}
-
-#[derive(Deserialize)]
-struct QueuesLite {
-    log: u64,
-    link_events: u64,
-}
-
-/// The run's resources, from its `/drogue/stats` records.
-#[derive(Clone, Debug, Default, PartialEq)]
-pub struct ResourceReview {
-    pub samples: u64,
-    /// Pipeline CPU (the process less the source and the log writer) over
-    /// the whole run, % of one core.
-    pub pipeline_cpu_pct: f64,
-    /// The busiest one-second interval, % of one core.
-    pub pipeline_cpu_max_pct: f64,
-    /// The source's own CPU (simulator rendering, camera decoding), % of one core.
-    pub source_cpu_pct: f64,
-    /// The log writer's CPU (encoding, compression, writing), % of one core.
-    pub log_writer_cpu_pct: f64,
-    pub peak_rss_bytes: u64,
-    pub max_log_queue: u64,
-    pub last_log_queue: u64,
-    pub max_link_event_queue: u64,
-}
 
 /// One frame for the plots (NaN where there is no value).
 #[derive(Clone, Copy, Debug)]
@@ -124,62 +42,6 @@ pub(crate) struct PlotPoint {
     pub range_m: f64,
     pub position_error_m: f64,
     pub normal_error_deg: f64,
-}
-
-/// Everything the review found.
-#[derive(Debug, Default)]
-pub struct ReviewReport {
-    pub log: PathBuf,
-    /// Why reading stopped early (a cut-short log), if it did.
-    pub cut: Option<String>,
-    /// Why reading stopped at damage (a chunk CRC, a bad record), if it did.
-    pub damaged: Option<String>,
-    /// MCAP records above the record bound, skipped without being read
-    /// (their frames or messages are missing from everything below), and
-    /// their bytes.
-    pub oversized_records: u64,
-    pub oversized_bytes: u64,
-    /// The log's MCAP metadata records (name, key/values), in file order.
-    pub metadata: Vec<(String, BTreeMap<String, String>)>,
-    /// Log time span of all messages, ns.
-    pub first_ns: Option<u64>,
-    pub last_ns: Option<u64>,
-    /// Capture times of the first and last frame, ns.
-    pub first_frame_ns: Option<u64>,
-    pub last_frame_ns: Option<u64>,
-    pub frames: u64,
-    /// Frames missing from `/camera/image` (gaps in the sequence numbers,
-    /// counting only the frames the log's mode keeps).
-    pub frames_lost: u64,
-    /// `image_encoding = "crop"`: a full frame every this many (1 otherwise).
-    pub full_frame_every: u64,
-    pub measurements: u64,
-    pub detected: u64,
-    /// Measurement time per frame, ms.
-    pub processing_ms: Histogram,
-    /// Capture to pose sent, ms (when the log has it).
-    pub latency_ms: Histogram,
-    /// The log is on the source's clock (`run --fast`): no latency in it.
-    pub source_clock: bool,
-    pub mavlink_out: BTreeMap<String, u64>,
-    pub mavlink_in: BTreeMap<String, u64>,
-    pub heartbeats_in: u64,
-    /// Times the autopilot's heartbeat stopped for more than 3 s.
-    pub link_losses: u64,
-    pub longest_heartbeat_gap_s: f64,
-    pub warnings: u64,
-    pub errors: u64,
-    pub problems: Vec<String>,
-    /// Items the log writer reported dropped (queue full + write errors).
-    pub log_dropped: u64,
-    pub truth_frames: u64,
-    pub by_range: Vec<RangeBin>,
-    /// From `/drogue/stats` (logs of `run`).
-    pub resources: Option<ResourceReview>,
-    pub files_written: Vec<PathBuf>,
-    pub plot_error: Option<String>,
-    #[doc(hidden)]
-    pub(crate) series: Vec<PlotPoint>,
 }
 
 fn angle_deg(a: [f64; 3], b: [f64; 3]) -> f64 {
@@ -223,9 +85,7 @@ pub fn review(log: &Path, out_dir: &Path) -> Result<ReviewReport, LogError> {
     super::check_mcap_input(log)?;
     if out_dir.exists() {
         let earlier_review = out_dir.join("poses.csv").is_file();
-        let empty = std::fs::read_dir(out_dir)
-            .map(|mut d| d.next().is_none())
-            .unwrap_or(false);
+        let empty = std::fs::read_dir(out_dir).is_ok_and(|mut d| d.next().is_none());
         if !(earlier_review || empty) {
             return Err(LogError::Config(format!(
                 "{} exists and is not an earlier review: choose another --out",
@@ -543,181 +403,11 @@ fn full_frame_every(metadata: &[(String, BTreeMap<String, String>)]) -> u64 {
         == Some("crop");
     let every = log
         .and_then(|l| l.get("full_frame_every"))
-        .and_then(|v| v.as_integer())
+        .and_then(toml::Value::as_integer)
         .and_then(|n| u64::try_from(n).ok())
         .filter(|&n| n >= 1);
     match (crop, every) {
         (true, Some(n)) => n,
         _ => 1,
-    }
-}
-
-impl ReviewReport {
-    /// First to last frame (all messages when the log has no frames), s.
-    pub fn duration_s(&self) -> f64 {
-        let span = if self.frames > 0 {
-            (self.first_frame_ns, self.last_frame_ns)
-        } else {
-            (self.first_ns, self.last_ns)
-        };
-        match span {
-            (Some(a), Some(b)) => b.saturating_sub(a) as f64 * 1e-9,
-            _ => 0.0,
-        }
-    }
-    pub fn detection_rate(&self) -> f64 {
-        if self.measurements == 0 {
-            0.0
-        } else {
-            self.detected as f64 / self.measurements as f64
-        }
-    }
-}
-
-fn percentiles(h: &Histogram) -> String {
-    if h.count() == 0 {
-        return "none in the log".into();
-    }
-    format!(
-        "p50 {:.2}  p95 {:.2}  p99 {:.2}  max {:.2} ms ({} frames)",
-        h.quantile(0.50),
-        h.quantile(0.95),
-        h.quantile(0.99),
-        h.max(),
-        h.count()
-    )
-}
-
-impl fmt::Display for ReviewReport {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        writeln!(f, "log        {}", self.log.display())?;
-        if let Some(c) = &self.cut {
-            writeln!(
-                f,
-                "           CUT SHORT, read up to: {c} (drogue-vision recover fixes the file)"
-            )?;
-        }
-        if let Some(d) = &self.damaged {
-            writeln!(
-                f,
-                "           DAMAGED, read up to: {d} (drogue-vision recover salvages the rest \
-                 and says what is lost)"
-            )?;
-        }
-        if self.oversized_records > 0 {
-            writeln!(
-                f,
-                "           SKIPPED: {} MCAP record(s) ({} bytes) above the {} MiB record \
-                 bound, not read (what they held is missing below)",
-                self.oversized_records,
-                self.oversized_bytes,
-                RECORD_LIMIT_BYTES >> 20
-            )?;
-        }
-        for (name, values) in &self.metadata {
-            writeln!(f, "metadata   {name}")?;
-            for (k, v) in values {
-                // Long values (the config as TOML) are in metadata.txt.
-                match v.lines().count() {
-                    0 | 1 => writeln!(f, "             {k}: {v}")?,
-                    n => writeln!(f, "             {k}: {n} lines, in metadata.txt")?,
-                }
-            }
-        }
-        writeln!(f, "duration   {:.1} s", self.duration_s())?;
-        let mode = if self.full_frame_every > 1 {
-            format!(
-                " (crop mode: full frames every {}th, crops on /camera/crop)",
-                self.full_frame_every
-            )
-        } else {
-            String::new()
-        };
-        writeln!(
-            f,
-            "frames     {} logged{mode}, {} lost or dropped before the log (sequence gaps), {} dropped by the log writer",
-            self.frames, self.frames_lost, self.log_dropped
-        )?;
-        writeln!(
-            f,
-            "detection  {} of {} frames ({:.1} %)",
-            self.detected,
-            self.measurements,
-            100.0 * self.detection_rate()
-        )?;
-        writeln!(f, "processing {}", percentiles(&self.processing_ms))?;
-        if self.source_clock {
-            writeln!(
-                f,
-                "latency    not measured (run --fast: the log is on the source's clock)"
-            )?;
-        } else {
-            writeln!(f, "latency    {}", percentiles(&self.latency_ms))?;
-        }
-        let sent: u64 = self.mavlink_out.values().sum();
-        let sent_list: Vec<String> = self
-            .mavlink_out
-            .iter()
-            .map(|(k, v)| format!("{k} {v}"))
-            .collect();
-        writeln!(
-            f,
-            "sent       {sent} MAVLink messages ({})",
-            sent_list.join(", ")
-        )?;
-        writeln!(
-            f,
-            "link       {} autopilot heartbeats, lost {} times (> 3 s), longest gap {:.1} s, {} messages received",
-            self.heartbeats_in,
-            self.link_losses,
-            self.longest_heartbeat_gap_s,
-            self.mavlink_in.values().sum::<u64>()
-        )?;
-        if let Some(res) = &self.resources {
-            writeln!(
-                f,
-                "resources  pipeline CPU {:.1} % of one core (busiest second {:.1} %), source {:.1} % and \
-                 log writer {:.1} % besides; peak resident memory {:.1} MB",
-                res.pipeline_cpu_pct,
-                res.pipeline_cpu_max_pct,
-                res.source_cpu_pct,
-                res.log_writer_cpu_pct,
-                res.peak_rss_bytes as f64 / 1e6
-            )?;
-            writeln!(
-                f,
-                "queues     log writer at most {} items ({} at the end), link events at most {} ({} samples)",
-                res.max_log_queue, res.last_log_queue, res.max_link_event_queue, res.samples
-            )?;
-        }
-        writeln!(
-            f,
-            "problems   {} errors, {} warnings",
-            self.errors, self.warnings
-        )?;
-        for p in &self.problems {
-            writeln!(f, "           {p}")?;
-        }
-        if self.truth_frames > 0 {
-            writeln!(
-                f,
-                "against the simulator's truth ({} frames):",
-                self.truth_frames
-            )?;
-            writeln!(
-                f,
-                "  range m      frames  detected  pos err mean/rms/max m     normal err mean/max deg"
-            )?;
-            for b in self.by_range.iter().filter(|b| b.frames > 0) {
-                writeln!(f, "  {b}")?;
-            }
-        }
-        for p in &self.files_written {
-            writeln!(f, "wrote      {}", p.display())?;
-        }
-        if let Some(e) = &self.plot_error {
-            writeln!(f, "plots      not drawn: {e}")?;
-        }
-        Ok(())
     }
 }

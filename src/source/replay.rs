@@ -1,18 +1,20 @@
 //! Replay: `/camera/image` back as [`Frame`]s, streaming (one record in
-//! memory at a time), with the camera from `/camera/calibration`.
+//! memory at a time), with the camera from `/camera/calibration`. The MCAP
+//! reader of frames, here with the sources (the `mcap:` source and
+//! `process` read through it); the log's own `reader` and `topics` below it
+//! say how the file and its messages are read.
 //!
 //! A record above the record bound (top-level, or inside a chunk) is
 //! skipped without being held in memory and the reading goes on
-//! ([`super::oversized`]); each skip is logged as a warning when it
+//! ([`crate::log::oversized`]); each skip is logged as a warning when it
 //! happens, the total when the log ends, and [`ReplayReader::oversized`]
 //! counts them for the summaries (`process`).
 
-use super::oversized::Oversized;
-use super::oversized::RECORD_LIMIT_BYTES;
-use super::recover::{LogMessageReader, counted_message_reader};
-use super::{LogError, recover::message_reader, topics};
 use crate::camera::CameraModel;
 use crate::frame::{Frame, FrameOrigin};
+use crate::log::oversized::{Oversized, RECORD_LIMIT_BYTES};
+use crate::log::reader::{LogMessageReader, counted_message_reader, message_reader};
+use crate::log::{LogError, topics};
 use foxglove::Decode;
 use foxglove::messages::{CameraCalibration, CompressedImage, RawImage};
 use image::GrayImage;
@@ -100,7 +102,7 @@ impl ReplayReader {
     pub fn first_camera(path: &Path) -> Result<CameraModel, LogError> {
         for message in message_reader(path)? {
             let m = message
-                .map_err(|e| LogError::format(path, super::recover::describe_read_error(&e)))?;
+                .map_err(|e| LogError::format(path, crate::log::reader::describe_read_error(&e)))?;
             if m.channel.topic == topics::CALIBRATION {
                 let cal = CameraCalibration::decode(m.data.as_ref())
                     .map_err(|e| LogError::format(path, format!("/camera/calibration: {e}")))?;
@@ -189,7 +191,7 @@ impl Iterator for ReplayReader {
                     self.finish();
                     return Some(Err(LogError::format(
                         &self.path,
-                        super::recover::describe_read_error(&e),
+                        crate::log::reader::describe_read_error(&e),
                     )));
                 }
             };

@@ -1,0 +1,231 @@
+//! What a frame shows, as the renderer takes it: the drogue, the hose and
+//! probe tubes, decals and a glare streak in the camera frame, and the
+//! scene-wide look. Plain data; the simulator and the sweep build it, the
+//! renderer only reads it.
+
+use super::tube::TubeAxis;
+use crate::geometry::{M3, V3};
+
+/// A tube (hose, probe): axis segment a -> b in the camera frame, radii.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Tube {
+    pub a: V3,
+    pub b: V3,
+    pub radius_a: f64,
+    pub radius_b: f64,
+    pub radiance: f64,
+}
+
+impl Tube {
+    /// Closest approach of the ray t * d (d = (x, y, 1), t = depth) to the
+    /// tube's axis: (depth t, distance beyond the surface in metres,
+    /// distance from the axis over the radius).
+    #[inline]
+    pub fn probe_ray(&self, d: &V3) -> Option<(f64, f64, f64)> {
+        TubeAxis::new(self)?.probe_ray(d)
+    }
+
+    /// Whether the ray hits the tube nearer than `depth` (z, metres).
+    pub fn occludes(&self, d: &V3, depth: f64) -> bool {
+        matches!(self.probe_ray(d), Some((t, sd, _)) if sd < 0.0 && t < depth)
+    }
+
+    /// The part of the tube in front of the plane z = `near`.
+    pub fn clipped(&self, near: f64) -> Option<Tube> {
+        let (za, zb) = (self.a.z, self.b.z);
+        if za < near && zb < near {
+            return None;
+        }
+        let mut t = *self;
+        if za < near || zb < near {
+            let f = (near - za) / (zb - za);
+            let p = self.a + (self.b - self.a) * f;
+            let r = self.radius_a + (self.radius_b - self.radius_a) * f;
+            if za < near {
+                t.a = p;
+                t.radius_a = r;
+            } else {
+                t.b = p;
+                t.radius_b = r;
+            }
+        }
+        Some(t)
+    }
+}
+
+/// The drogue in the camera frame.
+#[derive(Clone, Copy, Debug)]
+pub struct DrogueView {
+    pub centre: V3,
+    /// Unit normal toward the camera.
+    pub normal: V3,
+    /// In-plane basis; struts are laid out from `e1`.
+    pub e1: V3,
+    pub e2: V3,
+    pub inner_radius: f64,
+    pub canopy_radius: f64,
+    pub rim_width: f64,
+    pub struts: u32,
+    pub strut_width: f64,
+    pub disc: f64,
+    pub canopy: f64,
+    pub rim: f64,
+    pub strut: f64,
+}
+
+/// Everything one frame needs, in the camera frame.
+#[derive(Clone, Debug)]
+pub struct FrameScene {
+    pub drogue: DrogueView,
+    pub hose: Option<Tube>,
+    pub probe: Option<Tube>,
+    /// Camera -> NED rotation (for the sky).
+    pub r_ned_cam: M3,
+    /// Image motion of the drogue during the exposure, pixels.
+    pub blur_px: [f64; 2],
+    pub noise_seed: u64,
+    /// Leave the drogue out (drogue-free frames); default false.
+    pub without_drogue: bool,
+    /// Flat shapes behind the drogue and the tubes, painted in order; empty
+    /// by default.
+    pub decals: Vec<Decal>,
+    /// A sun-glare streak; `None` by default.
+    pub glare_streak: Option<GlareStreak>,
+}
+
+/// Outline of a [`Decal`] in its plane, metres.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum DecalShape {
+    /// A disc (a dark disc without a canopy, a blob, a balloon).
+    Disc { radius: f64 },
+    /// An annulus between two radii (a dark ring without a canopy).
+    Ring { inner: f64, outer: f64 },
+    /// A rectangle with half-sizes along `e1` and `e2`.
+    Rect { half_1: f64, half_2: f64 },
+    /// An irregular blob: radius `radius * (1 + wobble * w(phi))` with
+    /// w a fixed mix of the 2nd and 3rd harmonics (|w| <= 1) turned by
+    /// `phase` radians; `wobble` within 0..0.5.
+    Blob {
+        radius: f64,
+        wobble: f64,
+        phase: f64,
+    },
+}
+
+/// A flat, uniformly bright shape in the camera frame (plane through
+/// `centre` with unit normal `normal`, in-plane orthonormal axes `e1`, `e2`).
+/// Decals are background: the drogue, hose and probe are drawn over them,
+/// and they are neither blurred nor shaded, but hazed like every object.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Decal {
+    pub centre: V3,
+    pub normal: V3,
+    pub e1: V3,
+    pub e2: V3,
+    pub shape: DecalShape,
+    /// Relative radiance 0..1.
+    pub radiance: f64,
+}
+
+impl Decal {
+    /// A crescent: a dark disc of `radius` partly covered by a lighter disc
+    /// of `cover_radius` whose centre is `offset` metres along `e1`. The
+    /// crescent's outer arc is the dark disc's own circle, so its image is
+    /// a fine ellipse arc. Paint the two in the returned order.
+    #[allow(clippy::too_many_arguments)]
+    pub fn crescent(
+        centre: V3,
+        normal: V3,
+        e1: V3,
+        e2: V3,
+        radius: f64,
+        dark: f64,
+        cover_radius: f64,
+        offset: f64,
+        light: f64,
+    ) -> [Decal; 2] {
+        let disc = |centre: V3, radius: f64, radiance: f64| Decal {
+            centre,
+            normal,
+            e1,
+            e2,
+            shape: DecalShape::Disc { radius },
+            radiance,
+        };
+        [
+            disc(centre, radius, dark),
+            disc(centre + e1 * offset, cover_radius, light),
+        ]
+    }
+
+    /// Radius of a circle about `centre` that holds the whole shape, metres.
+    pub(super) fn bounding_radius(&self) -> f64 {
+        match self.shape {
+            DecalShape::Disc { radius } => radius,
+            DecalShape::Ring { outer, .. } => outer,
+            DecalShape::Rect { half_1, half_2 } => half_1.hypot(half_2),
+            DecalShape::Blob { radius, wobble, .. } => radius * (1.0 + wobble.abs()),
+        }
+    }
+
+    /// Signed distance (metres, negative inside) of the in-plane point
+    /// (x, y) to the outline (for `Blob` the radial distance, close enough
+    /// for anti-aliasing).
+    pub(super) fn signed_distance(&self, x: f64, y: f64) -> f64 {
+        match self.shape {
+            DecalShape::Disc { radius } => x.hypot(y) - radius,
+            DecalShape::Ring { inner, outer } => {
+                let rho = x.hypot(y);
+                (rho - outer).max(inner - rho)
+            }
+            DecalShape::Rect { half_1, half_2 } => {
+                let (qx, qy) = (x.abs() - half_1, y.abs() - half_2);
+                qx.max(0.0).hypot(qy.max(0.0)) + qx.max(qy).min(0.0)
+            }
+            DecalShape::Blob {
+                radius,
+                wobble,
+                phase,
+            } => {
+                let phi = y.atan2(x);
+                let w = 0.6 * (2.0 * phi + phase).sin() + 0.4 * (3.0 * phi + 2.0 * phase).sin();
+                x.hypot(y) - radius * (1.0 + wobble * w)
+            }
+        }
+    }
+}
+
+/// A sun-glare streak: a straight band of light added at the sensor (after
+/// vignetting, before noise), Gaussian across with full width at half
+/// maximum `width_px`, running across the whole frame. With a `strength`
+/// near 1 or more it saturates the pixels it crosses.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct GlareStreak {
+    /// A point of the band's centre line, pixels.
+    pub through_px: [f64; 2],
+    /// Direction of the centre line from +u toward +v, radians.
+    pub angle_rad: f64,
+    /// Full width at half maximum, pixels (> 0).
+    pub width_px: f64,
+    /// Radiance added on the centre line (relative, like the scene's).
+    pub strength: f64,
+}
+
+/// Scene-wide look (from the scenario).
+#[derive(Clone, Debug)]
+pub struct Look {
+    pub sky_zenith: f64,
+    pub sky_horizon: f64,
+    pub ground: f64,
+    pub cloud_cover: f64,
+    pub cloud_radiance: f64,
+    pub sun_ned: V3,
+    pub glare: f64,
+    pub haze: f64,
+    pub haze_radiance: f64,
+    pub gain: f64,
+    pub read_noise_dn: f64,
+    pub shot_noise_dn: f64,
+    pub vignette: f64,
+    pub cloud_seed: u32,
+}
