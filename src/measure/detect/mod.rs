@@ -336,12 +336,13 @@ fn glare_on_light_side(p: &[f32], s_min: f64, step: f64, e: &rim::RayEdge) -> bo
 }
 
 /// The angle between directions `a` and `b` (radians, each within a turn
-/// or two of zero, as `atan2` and ray angles are), 0..=pi: without the
-/// `fmod` of `rem_euclid`, which showed in profiles of the canopy and fill
-/// tests (a nearest-angle lookup per sample).
+/// of zero, as `atan2` and ray angles are, so that they differ by less than
+/// two turns), 0..=pi: without the `fmod` of `rem_euclid`, which showed in
+/// profiles of the canopy and fill tests (a nearest-angle lookup per
+/// sample).
 fn angle_gap(a: f64, b: f64) -> f64 {
     let mut d = (a - b).abs();
-    while d > TAU {
+    if d > TAU {
         d -= TAU;
     }
     d.min(TAU - d)
