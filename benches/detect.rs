@@ -67,19 +67,6 @@ fn bench(c: &mut Criterion) {
     }
 }
 
-/// The reference sets whose frames the per-frame figures cover.
-const SETS: [&str; 9] = [
-    "paper10",
-    "range",
-    "tilt",
-    "occlusion",
-    "noise",
-    "hard",
-    "hard_b",
-    "hard_c",
-    "negative",
-];
-
 /// The full-frame search on every frame of every reference set, as the
 /// issue's targets state it (median and p99 per frame): each frame's time
 /// is the best of 7 runs (as `opencv_baseline.py` takes the best of 20), so
@@ -92,7 +79,11 @@ fn reference_sets(c: &mut Criterion) {
     };
     let config = Config::embedded();
     let mut all = Vec::new();
-    for set in SETS {
+    // The sets with a drogue, and the drogue-free one.
+    for set in testing::DROGUE_REFERENCE_SETS
+        .into_iter()
+        .chain(["negative"])
+    {
         let folder = dir.join(set);
         let Ok(camera) = CameraModel::load(&folder.join("camera.yaml")) else {
             continue;

@@ -12,6 +12,9 @@
 //! The rim is darker than the sky around it (a dark band at the canopy's edge),
 //! so the edge we look for gets brighter going outward. Its inner side (band
 //! against the lighter canopy) has the opposite polarity and is not counted.
+//! Heavy haze can lift the band above a darker sky; when the brightening edge
+//! leaves the rim unsupported, the outermost darkening edge is tried (see
+//! [`canopy_supports`]).
 //!
 //! Far away the two predictions merge: the image is then nearly affine, and
 //! an affine view maps the concentric rim of both solutions to the same
@@ -219,12 +222,7 @@ pub fn canopy_supports(
     let [Some(rim0), Some(rim1)] = &rims else {
         return [None, None];
     };
-    let best = |s: &[Option<f64>; 2]| {
-        s.iter()
-            .flatten()
-            .copied()
-            .fold(None, |m: Option<f64>, x| Some(m.map_or(x, |m| m.max(x))))
-    };
+    let best = |s: &[Option<f64>; 2]| s.iter().flatten().copied().reduce(f64::max);
     let bright = supports_with(image, [rim0, rim1], Polarity::Brightening);
     if best(&bright).is_some_and(|b| b >= DARKENING_FALLBACK_BELOW) {
         return bright;

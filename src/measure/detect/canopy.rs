@@ -4,8 +4,10 @@
 //! The dark disc (radius r) lies inside the lighter canopy, whose outer rim
 //! is a concentric circle of radius R in the same plane. A candidate ellipse
 //! fits two poses (the single-circle ambiguity); each predicts where the
-//! canopy's rim must appear. A true drogue shows an edge there (the rim's
-//! darker band against the sky, brightening outward) on most of it; an
+//! canopy's rim must appear. A true drogue shows an edge there on most of
+//! it: the rim's darker band against the sky, brightening outward, or under
+//! heavy haze (the band lifted above a darker sky) the drogue's outer edge
+//! of either polarity, with its canopy lighter than the disc; an
 //! ellipse inside the disc (shading, the disc's lit half), the canopy's own
 //! rim taken for the disc, a crescent, a ring or a dark cloud predicts a rim
 //! where there is none. Saturated pixels (glare) and points outside the
@@ -124,12 +126,13 @@ pub fn ring_support(
     drogue: DrogueCircles,
     edge: RimEdge,
     profile: &mut Vec<f32>,
+    scratch: &mut Vec<f32>,
 ) -> Option<f64> {
     let poses = cone_pose(ellipse, camera, drogue.inner_radius_m)?;
     poses
         .iter()
         .filter_map(|pose| {
-            let (judged, seen) = pose_ring(image, camera, pose, drogue, edge, profile);
+            let (judged, seen) = pose_ring(image, camera, pose, drogue, edge, profile, scratch);
             (judged >= MIN_JUDGED).then(|| seen as f64 / judged as f64)
         })
         .max_by(f64::total_cmp)
@@ -143,6 +146,7 @@ fn pose_ring(
     drogue: DrogueCircles,
     edge: RimEdge,
     profile: &mut Vec<f32>,
+    scratch: &mut Vec<f32>,
 ) -> (usize, usize) {
     let canopy_radius_m = drogue.canopy_radius_m;
     let Some((e1, e2)) = circle_plane_basis(&pose.normal_camera) else {
@@ -221,8 +225,15 @@ fn pose_ring(
                 STEP_PX,
                 profile,
             );
-            outer_edge_offset(profile, lag, start, tolerance + half, edge.min_step_gray)
-                .is_some_and(|o| o.abs() <= tolerance)
+            outer_edge_offset(
+                profile,
+                lag,
+                start,
+                tolerance + half,
+                edge.min_step_gray,
+                scratch,
+            )
+            .is_some_and(|o| o.abs() <= tolerance)
                 && edge.mid_at(angle).is_some_and(|mid| {
                     canopy_between(
                         image,
@@ -286,7 +297,8 @@ fn canopy_between(
 /// the profile leaves the background's level by at least `min_step`, with
 /// most of the profile inside it off that level too (band and canopy), or
 /// `None`. The background is the median of the samples beyond offset
-/// `outside_from`.
+/// `outside_from`. `scratch` is reused between calls (this runs per rim
+/// point).
 ///
 /// Either polarity counts. The rim band is darker than a clear sky, but haze
 /// lifts the band toward the airlight, above a darker patch of sky or a
@@ -298,24 +310,25 @@ fn outer_edge_offset(
     start: f64,
     outside_from: f64,
     min_step: f32,
+    scratch: &mut Vec<f32>,
 ) -> Option<f64> {
     let first_outside = ((outside_from - start) / STEP_PX).ceil().max(0.0) as usize;
-    let mut outside: Vec<f32> = profile.get(first_outside..)?.to_vec();
-    if outside.len() < OUTER_MIN_BACKGROUND {
+    scratch.clear();
+    scratch.extend_from_slice(profile.get(first_outside..)?);
+    if scratch.len() < OUTER_MIN_BACKGROUND {
         return None;
     }
-    let mid = outside.len() / 2;
-    let background = *outside.select_nth_unstable_by(mid, f32::total_cmp).1;
+    let mid = scratch.len() / 2;
+    let background = *scratch.select_nth_unstable_by(mid, f32::total_cmp).1;
     // Box means of `lag + 1` samples (the disc's step width): the noise of
     // single samples would leave the background anywhere.
     let n = lag + 1;
     if profile.len() < 2 * n {
         return None;
     }
-    let means: Vec<f32> = profile
-        .windows(n)
-        .map(|w| w.iter().sum::<f32>() / n as f32)
-        .collect();
+    scratch.clear();
+    scratch.extend(profile.windows(n).map(|w| w.iter().sum::<f32>() / n as f32));
+    let means: &[f32] = scratch;
     let off = |m: f32| (m - background).abs() >= min_step;
     let edge = means.iter().rposition(|&m| off(m))?;
     let inside = &means[..=edge];
@@ -348,37 +361,31 @@ mod tests {
     /// A drogue seen face on at 2 m: disc (r 0.15 m, 60 px), canopy to
     /// 0.30 m, a dark rim band to 0.33 m, sky; or the disc alone.
     fn render(with_canopy: bool) -> GrayImage {
-        GrayImage::from_fn(640, 480, |x, y| {
-            let r_px = (f64::from(x) - 320.0).hypot(f64::from(y) - 240.0);
-            let r = r_px * 2.0 / 800.0;
-            let g = if r < 0.15 {
-                30
-            } else if !with_canopy {
-                170
-            } else if r < 0.30 {
-                150
-            } else if r < 0.33 {
-                70
-            } else {
-                170
-            };
-            Luma([g])
-        })
+        if with_canopy {
+            render_levels([30, 150, 70, 170])
+        } else {
+            render_levels([30, 170, 170, 170])
+        }
     }
 
     /// The drogue of [`render`] under haze: the airlight lifts the rim's
     /// band above a darker sky, so the band darkens outward to the sky.
     fn render_hazy() -> GrayImage {
+        render_levels([120, 175, 150, 135])
+    }
+
+    /// Disc, canopy, band and sky levels of the drogue of [`render`].
+    fn render_levels(levels: [u8; 4]) -> GrayImage {
         GrayImage::from_fn(640, 480, |x, y| {
             let r = (f64::from(x) - 320.0).hypot(f64::from(y) - 240.0) * 2.0 / 800.0;
             let g = if r < 0.15 {
-                120
+                levels[0]
             } else if r < 0.30 {
-                175
+                levels[1]
             } else if r < 0.33 {
-                150
+                levels[2]
             } else {
-                135
+                levels[3]
             };
             Luma([g])
         })
@@ -415,6 +422,7 @@ mod tests {
             DROGUE,
             EDGE,
             &mut profile,
+            &mut Vec::new(),
         );
         assert!(s.is_some_and(|s| s > 0.9), "{s:?}");
     }
@@ -430,19 +438,43 @@ mod tests {
             widths: &[(0.0, 2.0)],
             mids: &[(0.0, 147.0)],
         };
-        let s = ring_support(&render_hazy(), &cam, &disc(), DROGUE, edge, &mut profile);
+        let s = ring_support(
+            &render_hazy(),
+            &cam,
+            &disc(),
+            DROGUE,
+            edge,
+            &mut profile,
+            &mut Vec::new(),
+        );
         assert!(s.is_some_and(|s| s > 0.9), "{s:?}");
         // Without the disc's mid level the canopy cannot be told from a
         // dark shape beside the disc: only the brightening test is left,
         // and it sees nothing here.
         let blind = RimEdge { mids: &[], ..edge };
-        let s = ring_support(&render_hazy(), &cam, &disc(), DROGUE, blind, &mut profile);
+        let s = ring_support(
+            &render_hazy(),
+            &cam,
+            &disc(),
+            DROGUE,
+            blind,
+            &mut profile,
+            &mut Vec::new(),
+        );
         assert!(s.is_some_and(|s| s < 0.1), "{s:?}");
         // An ellipse inside the disc predicts a rim inside the canopy:
         // the canopy-to-band edge there is not the drogue's outer edge.
         for a in [35.0, 54.0] {
             let inner = Ellipse { a, b: a, ..disc() };
-            let s = ring_support(&render_hazy(), &cam, &inner, DROGUE, edge, &mut profile);
+            let s = ring_support(
+                &render_hazy(),
+                &cam,
+                &inner,
+                DROGUE,
+                edge,
+                &mut profile,
+                &mut Vec::new(),
+            );
             assert!(s.is_some_and(|s| s < 0.1), "{a}: {s:?}");
         }
     }
@@ -451,7 +483,15 @@ mod tests {
     fn a_disc_without_canopy_and_a_wrong_size_show_none() {
         let mut profile = Vec::new();
         let cam = camera();
-        let bare = ring_support(&render(false), &cam, &disc(), DROGUE, EDGE, &mut profile);
+        let bare = ring_support(
+            &render(false),
+            &cam,
+            &disc(),
+            DROGUE,
+            EDGE,
+            &mut profile,
+            &mut Vec::new(),
+        );
         assert!(bare.is_some_and(|s| s < 0.1), "{bare:?}");
         // An ellipse inside the disc predicts a rim inside the canopy.
         let inner = Ellipse {
@@ -459,7 +499,15 @@ mod tests {
             b: 35.0,
             ..disc()
         };
-        let s = ring_support(&render(true), &cam, &inner, DROGUE, EDGE, &mut profile);
+        let s = ring_support(
+            &render(true),
+            &cam,
+            &inner,
+            DROGUE,
+            EDGE,
+            &mut profile,
+            &mut Vec::new(),
+        );
         assert!(s.is_some_and(|s| s < 0.1), "{s:?}");
     }
 }

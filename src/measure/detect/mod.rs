@@ -1084,6 +1084,7 @@ impl Detector {
             self.drogue,
             edge,
             &mut self.profile,
+            &mut self.scratch,
         );
         if let Some(seen) = canopy
             && ellipse.a >= self.cfg.canopy_required_from_px
