@@ -46,7 +46,10 @@ pub struct EdgeCircle {
 pub struct EdgeVoter {
     /// Edge pixels: position and unit gradient (toward the light side).
     edges: Vec<([i32; 2], [f32; 2])>,
+    /// Votes per centre, in the padded frame of [`Self::vote`].
     votes: Vec<u16>,
+    /// Row length of `votes`.
+    stride: usize,
     histogram: Vec<u32>,
 }
 
@@ -70,6 +73,7 @@ impl EdgeVoter {
         let r_max = ((max_radius_px / f).ceil() as usize).clamp(r_min, MAX_VOTE_RADIUS);
         self.collect_edges(img, MIN_GRADIENT_SHARE * min_contrast_gray);
         self.vote(w, h, r_min, r_max);
+        tracing::trace!(edges = self.edges.len(), r_min, r_max, "edge pixels voting");
         let peaks = self.peaks(w, h, r_min, max_peaks);
         peaks
             .into_iter()
@@ -116,29 +120,37 @@ impl EdgeVoter {
     }
 
     /// Each edge votes for the centres r_min..=r_max pixels against its
-    /// gradient.
+    /// gradient. The votes lie in a frame padded by one pixel before and
+    /// `r_max + 1` after each side (`self.stride` wide), so that no vote
+    /// needs a bounds test: a ray that has left the frame never comes back,
+    /// and its votes beyond the border fall in the padding, which the peak
+    /// search does not read.
     fn vote(&mut self, w: usize, h: usize, r_min: usize, r_max: usize) {
+        let stride = w + r_max + 2;
+        self.stride = stride;
         self.votes.clear();
-        self.votes.resize(w * h, 0);
-        // Rounding half away from zero, as `f32::round`, without its libm
-        // call (a third of the voting's cost): below -0.5 a coordinate is
-        // outside the frame anyway.
-        let round = |v: f32| (v > -0.5).then_some((v + 0.5) as i64);
+        self.votes.resize(stride * (h + r_max + 2), 0);
+        // The padded cell of a coordinate: rounding half away from zero, as
+        // `f32::round`, without its libm call; at or below -0.5 the
+        // padding's first cell.
+        let cell = |v: f32| {
+            let t = v + 0.5;
+            if t > 0.0 { t as i32 as usize + 1 } else { 0 }
+        };
         for &([x, y], [gx, gy]) in &self.edges {
+            let (x, y) = (x as f32, y as f32);
             for r in r_min..=r_max {
-                let (Some(cx), Some(cy)) = (
-                    round(x as f32 - gx * r as f32),
-                    round(y as f32 - gy * r as f32),
-                ) else {
-                    break;
-                };
-                if cx >= w as i64 || cy >= h as i64 {
-                    break;
-                }
-                let v = &mut self.votes[cy as usize * w + cx as usize];
+                let r = r as f32;
+                let i = cell(y - gy * r) * stride + cell(x - gx * r);
+                let v = &mut self.votes[i];
                 *v = v.saturating_add(1);
             }
         }
+    }
+
+    /// The votes for frame pixel (x, y).
+    fn votes_at(&self, x: usize, y: usize) -> u16 {
+        self.votes[(y + 1) * self.stride + x + 1]
     }
 
     /// The strongest local maxima of the votes (summed over 3x3), at least
@@ -154,7 +166,7 @@ impl EdgeVoter {
             let mut s = 0u32;
             for yy in y - 1..=y + 1 {
                 for xx in x - 1..=x + 1 {
-                    s += u32::from(self.votes[yy * w + xx]);
+                    s += u32::from(self.votes_at(xx, yy));
                 }
             }
             s
@@ -164,7 +176,7 @@ impl EdgeVoter {
         let mut found: Vec<(usize, usize, u32)> = Vec::new();
         for y in 1..h - 1 {
             for x in 1..w - 1 {
-                if self.votes[y * w + x] == 0 {
+                if self.votes_at(x, y) == 0 {
                     continue;
                 }
                 let s = sum3(x, y);
@@ -206,7 +218,9 @@ impl EdgeVoter {
         let (cx, cy) = (c[0] as f64, c[1] as f64);
         for &([x, y], [gx, gy]) in &self.edges {
             let (dx, dy) = (f64::from(x) - cx, f64::from(y) - cy);
-            let d = dx.hypot(dy);
+            // Integer offsets: exact squares, and the square root is
+            // correctly rounded (no libm call, as `hypot` makes).
+            let d = (dx * dx + dy * dy).sqrt();
             if d < r_min as f64 - 0.5 || d > r_max as f64 + 0.5 {
                 continue;
             }
