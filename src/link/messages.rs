@@ -252,7 +252,7 @@ impl DroguePose {
         })
     }
 
-    pub fn q_body_drogue(&self) -> UnitQuaternion<f64> {
+    pub(crate) fn q_body_drogue(&self) -> UnitQuaternion<f64> {
         UnitQuaternion::from_rotation_matrix(&self.r_body_drogue)
     }
 

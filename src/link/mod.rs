@@ -27,13 +27,13 @@
 //! autopilot's telemetry) stay on the wall clock.
 
 pub mod address;
-pub mod events;
+pub(crate) mod events;
 pub mod frame;
 mod handoff;
 pub mod messages;
 mod session;
-pub mod signing;
-pub mod stats;
+pub(crate) mod signing;
+pub(crate) mod stats;
 pub mod telemetry;
 mod transport;
 

@@ -23,7 +23,7 @@
 //! `/camera/image` is a frame source: `crate::source::replay`.
 
 mod config;
-pub mod crop;
+pub(crate) mod crop;
 mod error;
 mod layer;
 pub mod metadata;
@@ -33,7 +33,7 @@ pub mod reader;
 pub mod recover;
 pub mod review;
 mod send_stamps;
-pub mod storage;
+pub(crate) mod storage;
 pub mod topics;
 mod writer;
 

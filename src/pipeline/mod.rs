@@ -15,13 +15,13 @@
 //! `process` runs the same input and stage in one thread, frame by frame
 //! (`commands::process`). See ARCHITECTURE.md for the picture.
 
-pub mod closed_loop;
-pub mod input;
-pub mod live;
-pub mod meters;
-pub mod pacing;
-pub mod provenance;
-pub mod signals;
-pub mod stage;
+pub(crate) mod closed_loop;
+pub(crate) mod input;
+pub(crate) mod live;
+pub(crate) mod meters;
+pub(crate) mod pacing;
+pub(crate) mod provenance;
+pub(crate) mod signals;
+pub(crate) mod stage;
 pub mod status;
-pub mod threads;
+pub(crate) mod threads;

@@ -1,8 +1,8 @@
 //! Frame sources for `run`: the simulator, a folder of images, an MCAP log,
 //! a V4L2 camera.
 
-pub mod dir;
-pub mod mcap;
+pub(crate) mod dir;
+pub(crate) mod mcap;
 pub mod replay;
 pub mod sim;
 pub mod v4l;

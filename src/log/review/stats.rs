@@ -90,10 +90,10 @@ impl RangeBin {
     pub fn mean_pos_err_m(&self) -> f64 {
         self.sum_pos_err_m / self.detected.max(1) as f64
     }
-    pub fn rms_pos_err_m(&self) -> f64 {
+    pub(crate) fn rms_pos_err_m(&self) -> f64 {
         (self.sum_pos_err2_m2 / self.detected.max(1) as f64).sqrt()
     }
-    pub fn mean_normal_err_deg(&self) -> f64 {
+    pub(crate) fn mean_normal_err_deg(&self) -> f64 {
         self.sum_normal_err_deg / self.detected.max(1) as f64
     }
 }

@@ -29,7 +29,7 @@ pub enum Occluder {
 }
 
 impl Occluder {
-    pub const STRUCTURED: [Occluder; 4] = [
+    pub(crate) const STRUCTURED: [Occluder; 4] = [
         Occluder::Chord,
         Occluder::Wedge,
         Occluder::Tube,
