@@ -79,7 +79,9 @@ use serde_json::{Value, json};
 /// `ardupilotmega` does not include). Both share the MAVLink 2 framing.
 #[derive(Clone, Debug)]
 pub enum Outbound {
+    /// A message of the `ardupilotmega` dialect.
     Ardupilot(MavMessage),
+    /// A message of the `development` dialect (TARGET_RELATIVE).
     Development(dev::MavMessage),
 }
 
@@ -90,6 +92,7 @@ impl From<MavMessage> for Outbound {
 }
 
 impl Outbound {
+    /// The message's MAVLink name, e.g. `LANDING_TARGET`.
     pub fn name(&self) -> &'static str {
         match self {
             Self::Ardupilot(m) => m.message_name(),

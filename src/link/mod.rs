@@ -137,10 +137,14 @@ pub struct LinkConfig {
 /// after the start are never errors: they are logged, counted and retried.
 #[derive(Debug, thiserror::Error)]
 pub enum LinkError {
+    /// The MAVLink address does not parse.
     #[error("mavlink connection {0}")]
     Address(String),
+    /// A `[link]` setting is unusable.
     #[error("[link] config: {0}")]
     Config(String),
+    /// The signing settings are unusable (a key file and a passphrase
+    /// both, or a key file that cannot be read).
     #[error("[link] signing: {0}")]
     Signing(String),
 }
