@@ -64,6 +64,7 @@ pub struct LogConfig {
     pub dir: PathBuf,
     /// File name prefix: `<prefix>_<UTC start>_<part>.mcap`.
     pub file_prefix: String,
+    /// How frames are stored: PNG, JPEG, raw, or crops around the drogue.
     pub image_encoding: ImageEncoding,
     /// JPEG quality of `image_encoding = "jpeg"` (1..=100).
     pub jpeg_quality: u8,
