@@ -203,7 +203,7 @@ pub struct DrogueTruth {
     /// Share of the inner rim visible (in the image, not hidden), 0..1.
     pub visible_rim_frac: f64,
     /// Enough of the rim is visible for a detection to be expected
-    /// (the simulator's own rule, [`MIN_VISIBLE_RIM`]).
+    /// (the simulator's own rule, [`MIN_VISIBLE_RIM`](crate::simulator::MIN_VISIBLE_RIM)).
     pub expect_detect: bool,
 }
 

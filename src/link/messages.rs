@@ -35,7 +35,7 @@
 //!   reset_counter = track_epoch (mod 256).
 //! - ODOMETRY: the same pose, frame_id MAV_FRAME_LOCAL_FRD (= D),
 //!   child_frame_id MAV_FRAME_BODY_FRD, q = q_D_body, velocities unknown
-//!   (NaN, velocity_covariance[0] = NaN), estimator MAV_ESTIMATOR_TYPE_VISION.
+//!   (NaN, `velocity_covariance[0]` = NaN), estimator MAV_ESTIMATOR_TYPE_VISION.
 //!
 //! - TARGET_RELATIVE (`target_relative`, id 511, MAVLink `development`
 //!   dialect, for PX4's vision_target_estimator): the drogue centre relative

@@ -22,7 +22,7 @@
 //! possible still sends its poses. There `max_rate_hz` is kept on the
 //! source's clock too (a measurement over the budget is not sent, counted
 //! as `rate_limited`), and [`LinkHandle::wait_handled`] lets the measurement
-//! wait until the link is done with each one ([`handoff`]) instead of
+//! wait until the link is done with each one (`handoff`) instead of
 //! handing over latest-wins. The protocol's own times (TIMESYNC, the
 //! autopilot's telemetry) stay on the wall clock.
 

@@ -22,7 +22,7 @@ pub const IMAGE: &str = "/camera/image";
 pub const CALIBRATION: &str = "/camera/calibration";
 /// `image_encoding = "crop"`: the PNG crop around the drogue, every frame.
 pub const CROP: &str = "/camera/crop";
-/// JSON: where each `/camera/crop` lies in its frame ([`super::crop`]).
+/// JSON: where each `/camera/crop` lies in its frame (`super::crop`).
 pub const CROP_INFO: &str = "/camera/crop_info";
 /// Image annotations: the fitted ellipse, the rim points and the inliers.
 pub const ANNOTATIONS: &str = "/drogue/annotations";

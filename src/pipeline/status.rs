@@ -5,7 +5,7 @@
 //! (<https://no-color.org>).
 //!
 //! The figures come from counters the pipeline keeps anyway
-//! ([`PipelineMeters`]): nothing here is on the frame path.
+//! (`PipelineMeters`): nothing here is on the frame path.
 
 use super::meters::PipelineMeters;
 use crate::link::LinkHandle;

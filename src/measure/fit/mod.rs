@@ -1,7 +1,7 @@
 //! Ellipse fitting: the paper's least squares (A+C=1) and Algorithm 1, the
 //! fixed-threshold RANSAC the paper compares against, and our adaptive default.
 //!
-//! All methods share the same front end ([`Points`]): non-finite points are
+//! All methods share the same front end (`Points`): non-finite points are
 //! dropped (and flagged as outliers), and the rest are moved to their centroid
 //! and scaled to unit RMS radius, so that every algebraic fit is well
 //! conditioned whatever the pixel coordinates. Distances and thresholds are
