@@ -12,8 +12,11 @@ use std::path::Path;
 /// to blame, the field (empty: the file as a whole, unreadable or not YAML).
 #[derive(Debug)]
 pub struct CameraError {
+    /// The camera file, as given.
     pub file: String,
+    /// The field at fault; empty when the file as a whole is.
     pub field: String,
+    /// What is wrong.
     pub message: String,
 }
 
@@ -36,8 +39,11 @@ impl std::error::Error for CameraError {}
 /// Intrinsics and plumb_bob distortion of one camera.
 #[derive(Clone, Debug, PartialEq)]
 pub struct CameraModel {
+    /// The camera's name in its file (ROS `camera_name`), for logs.
     pub name: String,
+    /// Image width, pixels.
     pub width: u32,
+    /// Image height, pixels.
     pub height: u32,
     /// Intrinsic matrix K (pixels).
     pub k: Matrix3<f64>,
@@ -284,19 +290,25 @@ impl CameraModel {
         })
     }
 
+    /// Focal length along x, pixels.
     pub fn fx(&self) -> f64 {
         self.k[(0, 0)]
     }
+    /// Focal length along y, pixels.
     pub fn fy(&self) -> f64 {
         self.k[(1, 1)]
     }
+    /// Principal point x, pixels.
     pub fn cx(&self) -> f64 {
         self.k[(0, 2)]
     }
+    /// Principal point y, pixels.
     pub fn cy(&self) -> f64 {
         self.k[(1, 2)]
     }
 
+    /// Whether any distortion coefficient is non-zero (else undistortion is the
+    /// identity).
     pub fn has_distortion(&self) -> bool {
         self.distortion.iter().any(|&d| d != 0.0)
     }

@@ -153,12 +153,31 @@ fn default_value() -> &'static Result<Value, String> {
 /// A configuration that could not be used.
 #[derive(Debug, thiserror::Error)]
 pub enum ConfigError {
+    /// The file could not be read or is not TOML.
     #[error("config {file}: {message}")]
-    Read { file: String, message: String },
+    Read {
+        /// The config file's name, as given.
+        file: String,
+        /// Why it could not be read or parsed.
+        message: String,
+    },
+    /// A key the default config does not have (a typo, or a removed key).
     #[error("config {file}: unknown key `{key}`")]
-    UnknownKey { file: String, key: String },
+    UnknownKey {
+        /// The config file.
+        file: String,
+        /// The key, dotted (`section.key`).
+        key: String,
+    },
+    /// A value of the wrong type or out of its range, or keys that
+    /// contradict each other.
     #[error("config {file}: {message}")]
-    Invalid { file: String, message: String },
+    Invalid {
+        /// The config file.
+        file: String,
+        /// Which value is wrong, and why.
+        message: String,
+    },
 }
 
 /// `[camera]`: where the intrinsics come from.
@@ -205,15 +224,25 @@ pub enum VehiclePoseSource {
 #[derive(Clone, Debug, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Config {
+    /// `[camera]`: where the intrinsics come from.
     pub camera: CameraConfig,
+    /// `[drogue]`: the target's radii.
     pub drogue: DrogueConfig,
+    /// `[mount]`: the camera and the probe tip on the receiver.
     pub mount: MountConfig,
+    /// `[detect]`: finding the drogue's rim in a frame.
     pub detect: DetectConfig,
+    /// `[fit]`: the robust ellipse fit.
     pub fit: FitConfig,
+    /// `[track]`: prediction and continuity between frames.
     pub track: TrackConfig,
+    /// `[link]`: the MAVLink connection and what is sent.
     pub link: LinkConfig,
+    /// `[log]`: the MCAP flight log.
     pub log: LogConfig,
+    /// `[run]`: the live pipeline's defaults.
     pub run: RunConfig,
+    /// `[v4l]`: the V4L2 camera's format and controls.
     pub v4l: V4lConfig,
 }
 

@@ -14,9 +14,17 @@ pub enum FrameOrigin {
     /// Read from an image file.
     File(PathBuf),
     /// Read back from an MCAP log (`/camera/image`).
-    Replay { path: PathBuf, seq: u64 },
+    Replay {
+        /// The log file.
+        path: PathBuf,
+        /// The frame's sequence number in the log.
+        seq: u64,
+    },
     /// Captured by a live camera.
-    Camera { device: String },
+    Camera {
+        /// The device, e.g. `/dev/video0`.
+        device: String,
+    },
 }
 
 /// An 8-bit gray frame with its capture time.
@@ -27,6 +35,8 @@ pub struct Frame {
     /// Capture time, nanoseconds since the Unix epoch (the MCAP log_time and the
     /// MAVLink time fields use this, never the processing time).
     pub capture_time_ns: u64,
+    /// The pixels, 8-bit gray.
     pub image: GrayImage,
+    /// Where the frame came from.
     pub origin: FrameOrigin,
 }

@@ -34,16 +34,21 @@ pub fn make_this_thread_background(what: &str) {
 /// Why the calling thread could not be made real-time.
 #[derive(Debug, thiserror::Error)]
 pub enum RealtimeError {
+    /// The priority asked for is not within 1-99.
     #[error("real-time priority {0} is outside 1-99")]
     OutOfRange(u8),
+    /// The system refused SCHED_FIFO (no privilege or RLIMIT_RTPRIO).
     #[error(
         "SCHED_FIFO priority {priority} refused ({source}): run as root, give the \
          binary CAP_SYS_NICE, or raise RLIMIT_RTPRIO (systemd: LimitRTPRIO={priority})"
     )]
     Refused {
+        /// The priority asked for.
         priority: u8,
+        /// The system's refusal.
         source: std::io::Error,
     },
+    /// Not on Linux.
     #[error("real-time scheduling is only supported on Linux")]
     Unsupported,
 }

@@ -15,6 +15,7 @@ fn xyz(v: &Vector3<f64>) -> [f64; 3] {
 pub struct DetectionRecord {
     /// File name, or the frame's sequence number for an MCAP input.
     pub frame: String,
+    /// A drogue was found in the frame (the pose fields are null otherwise).
     pub detected: bool,
     /// Undistorted pixels; a >= b; theta from +u toward +v in (-pi/2, pi/2].
     pub ellipse: Option<Ellipse>,
@@ -38,12 +39,14 @@ pub struct DetectionRecord {
     pub normal_sigma_rad: Option<f64>,
     /// How the two-fold ambiguity was settled.
     pub disambiguation: Option<Disambiguation>,
+    /// Rim points, inliers, RMS residual and score of the fit.
     pub quality: Option<FitQuality>,
     /// Incremented each time the track is lost and found again.
     pub track_epoch: Option<u32>,
     /// Capture time, ns since the Unix epoch.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub capture_time_ns: Option<u64>,
+    /// Processing time of each stage, microseconds (left out when unknown).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub times_us: Option<StageTimes>,
     /// Only when the frame could not be read.

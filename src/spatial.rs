@@ -31,6 +31,7 @@ pub struct Point<F> {
 }
 
 impl<F> Point<F> {
+    /// The point at `metres` (coordinates in frame `F`).
     pub fn new(metres: Vector3<f64>) -> Self {
         Self {
             metres,
@@ -38,6 +39,7 @@ impl<F> Point<F> {
         }
     }
 
+    /// The point at `[x, y, z]` metres in frame `F`.
     pub fn from_array(metres: [f64; 3]) -> Self {
         Self::new(Vector3::from(metres))
     }
@@ -47,6 +49,7 @@ impl<F> Point<F> {
         &self.metres
     }
 
+    /// The coordinates `[x, y, z]`, metres, for file formats and messages.
     pub fn to_array(&self) -> [f64; 3] {
         self.metres.into()
     }
@@ -93,10 +96,12 @@ impl<F> Direction<F> {
         }
     }
 
+    /// The unit vector, for the math inside a module.
     pub fn vector(&self) -> &Vector3<f64> {
         &self.unit
     }
 
+    /// The components `[x, y, z]`, for file formats and messages.
     pub fn to_array(&self) -> [f64; 3] {
         self.unit.into()
     }

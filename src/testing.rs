@@ -92,22 +92,31 @@ pub fn reference_set(name: &str) -> PathBuf {
 /// out (a frame without a drogue has no ellipse) are options.
 #[derive(Clone, Debug, serde::Deserialize)]
 pub struct Truth {
+    /// The image's file name in the set.
     pub frame: String,
     /// `detect`, `no_detect`, `error`, ...: what the frame must give.
     pub expect: String,
     /// The set's sub-group (`range=01m`), where it has them.
     pub group: Option<String>,
+    /// Exact image ellipse of the inner circle, undistorted pixels.
     pub ellipse: Option<Ellipse>,
     /// The inner circle's radius, metres.
     pub radius: Option<f64>,
+    /// Inner circle centre, camera frame, metres.
     pub position_camera: Option<[f64; 3]>,
+    /// Unit normal of the drogue, camera frame, toward the camera.
     pub normal_camera: Option<[f64; 3]>,
     /// The mirror solution of the same image ellipse.
     pub alt_position_camera: Option<[f64; 3]>,
+    /// Normal of the mirror solution, camera frame.
     pub alt_normal_camera: Option<[f64; 3]>,
+    /// Distance from the camera to the inner circle's centre, metres.
     pub range_m: Option<f64>,
+    /// Angle between the drogue normal and the line of sight, degrees.
     pub tilt_deg: Option<f64>,
+    /// Share of the inner rim hidden by the probe, 0..1.
     pub probe_rim_frac: Option<f64>,
+    /// Inner circle centre, body FRD, metres.
     pub position_body: Option<[f64; 3]>,
 }
 

@@ -14,7 +14,9 @@ use toml::Value;
 /// ("0: off").
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Range {
+    /// Lower bound.
     pub lo: f64,
+    /// Upper bound.
     pub hi: f64,
     /// `lo` itself is excluded.
     pub lo_open: bool,

@@ -10,17 +10,25 @@ use serde_yaml::Value;
 /// Intrinsics and distortion of the simulated camera.
 #[derive(Clone, Debug, PartialEq)]
 pub struct SimCamera {
+    /// Image width, pixels.
     pub width: u32,
+    /// Image height, pixels.
     pub height: u32,
+    /// Focal length along x, pixels.
     pub fx: f64,
+    /// Focal length along y, pixels.
     pub fy: f64,
+    /// Principal point x, pixels.
     pub cx: f64,
+    /// Principal point y, pixels.
     pub cy: f64,
     /// plumb_bob k1, k2, p1, p2, k3.
     pub distortion: [f64; 5],
 }
 
 impl SimCamera {
+    /// Whether any distortion coefficient is non-zero (else rays map through
+    /// the pinhole alone).
     pub fn has_distortion(&self) -> bool {
         self.distortion.iter().any(|k| *k != 0.0)
     }

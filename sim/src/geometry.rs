@@ -6,7 +6,9 @@
 
 use nalgebra::{Matrix3, Quaternion, Rotation3, UnitQuaternion, Vector3};
 
+/// A 3-vector (positions metres, directions unit), in the frame its name says.
 pub type V3 = Vector3<f64>;
+/// A 3x3 matrix, mostly rotations `r_<to>_<from>`.
 pub type M3 = Matrix3<f64>;
 
 /// Rotation `R = Rz(yaw) * Ry(pitch) * Rx(roll)`, angles in radians.
@@ -53,6 +55,7 @@ pub fn perpendicular(n: &V3) -> V3 {
     (a - n * a.dot(n)).normalize()
 }
 
+/// The vector's components `[x, y, z]`.
 pub fn to_array(v: &V3) -> [f64; 3] {
     [v.x, v.y, v.z]
 }

@@ -34,10 +34,15 @@ use serde::{Deserialize, Serialize};
 /// image conic): a >= b, theta from +u toward +v in (-pi/2, pi/2].
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct TruthEllipse {
+    /// Centre u, undistorted pixels.
     pub cx: f64,
+    /// Centre v, undistorted pixels.
     pub cy: f64,
+    /// Semi-major axis, pixels.
     pub a: f64,
+    /// Semi-minor axis, pixels.
     pub b: f64,
+    /// Angle of the major axis from +u toward +v, radians.
     pub theta: f64,
 }
 
@@ -71,9 +76,11 @@ pub struct FrameTruth {
     pub normal_camera: [f64; 3],
     /// The mirror solution that images to the same ellipse.
     pub alt_position_camera: [f64; 3],
+    /// Normal of the mirror solution, camera frame, toward the camera.
     pub alt_normal_camera: [f64; 3],
     /// Exact image ellipse of the inner circle; `None` when not in front.
     pub ellipse: Option<TruthEllipse>,
+    /// Distance from the camera to the inner circle's centre, metres.
     pub range_m: f64,
     /// Angle between the drogue normal and the line of sight, degrees.
     pub tilt_deg: f64,
@@ -81,6 +88,7 @@ pub struct FrameTruth {
     pub probe_rim_frac: f64,
     /// Share of the inner rim hidden by the hose, 0..1.
     pub hose_rim_frac: f64,
+    /// The whole inner rim lies inside the image.
     pub rim_fully_in_image: bool,
     /// Inner circle centre, receiver body FRD, metres.
     pub position_body: [f64; 3],

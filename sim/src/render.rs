@@ -53,6 +53,8 @@ use sensor::{bounded_blur, inv_normal};
 use sky::sky_row;
 use tube::TubeLayer;
 
+/// Renders frames of one camera: holds its per-pixel ray table, so build one
+/// per lens and reuse it.
 pub struct Renderer {
     cam: SimCamera,
     w: usize,
@@ -79,6 +81,8 @@ fn clamp01(x: f64) -> f64 {
 }
 
 impl Renderer {
+    /// A renderer for `cam` with the scene-wide `look`; computes every pixel's
+    /// undistorted ray.
     pub fn new(cam: &SimCamera, look: Look) -> Renderer {
         let (w, h) = (cam.width as usize, cam.height as usize);
         let pinhole = |u: f64, v: f64| ((u - cam.cx) / cam.fx, (v - cam.cy) / cam.fy);
@@ -141,6 +145,7 @@ impl Renderer {
         self.look = look;
     }
 
+    /// The scene-wide look in use.
     pub fn look(&self) -> &Look {
         &self.look
     }

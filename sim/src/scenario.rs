@@ -35,21 +35,33 @@ pub const BUILTINS: [(&str, &str); 5] = [
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct Scenario {
+    /// Run name, shown in logs and reports (the builtin's, or the file's choice).
     pub name: String,
     /// Seed of every random process (turbulence, scene, noise).
     pub seed: u64,
+    /// Frame rate of the rendered stream, frames per second.
     pub fps: f64,
+    /// Length of the run, seconds of simulated time.
     pub duration_s: f64,
     /// Capture time of frame 0, ns since the Unix epoch.
     pub start_time_ns: u64,
+    /// The camera's intrinsics, distortion and exposure.
     pub camera: CameraSpec,
+    /// Where the camera and the probe sit on the receiver.
     pub mount: MountSpec,
+    /// The tanker's straight, level flight.
     pub tanker: TankerSpec,
+    /// The drogue's geometry, trail position and look.
     pub drogue: DrogueSpec,
+    /// Gusts that sway the drogue.
     pub turbulence: TurbulenceSpec,
+    /// The receiver's bow wave pushing the drogue as the nose nears.
     pub bow_wave: BowWaveSpec,
+    /// The hose's oscillation after a missed contact.
     pub whip: WhipSpec,
+    /// The receiver's scripted approach and attitude.
     pub receiver: ReceiverSpec,
+    /// Sky, clouds, sun and haze around the drogue.
     pub scene: SceneSpec,
     /// Folder of the scenario file (for a relative camera file); not a key.
     #[serde(skip)]
@@ -65,11 +77,17 @@ pub struct Scenario {
 pub struct CameraSpec {
     /// ROS camera_info YAML; relative to the scenario file. "" = the keys below.
     pub file: String,
+    /// Image width, pixels.
     pub width: u32,
+    /// Image height, pixels.
     pub height: u32,
+    /// Focal length along x, pixels.
     pub fx: f64,
+    /// Focal length along y, pixels.
     pub fy: f64,
+    /// Principal point x, pixels from the top-left pixel's centre.
     pub cx: f64,
+    /// Principal point y, pixels from the top-left pixel's centre.
     pub cy: f64,
     /// plumb_bob k1, k2, p1, p2, k3.
     pub distortion: [f64; 5],
@@ -89,22 +107,33 @@ pub struct CameraSpec {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct MountSpec {
+    /// Camera position, body FRD, metres.
     pub position_body_m: [f64; 3],
+    /// Roll of the camera's optical frame from the body axes, degrees.
     pub roll_deg: f64,
+    /// Pitch of the camera's optical frame from the body axes, degrees.
     pub pitch_deg: f64,
+    /// Yaw of the camera's optical frame from the body axes, degrees.
     pub yaw_deg: f64,
+    /// The probe's tip, body FRD, metres: where contact is judged.
     pub probe_tip_body_m: [f64; 3],
     /// Where the probe leaves the fuselage.
     pub probe_base_body_m: [f64; 3],
+    /// Probe radius where it leaves the fuselage, metres.
     pub probe_base_radius_m: f64,
+    /// Probe radius at the tip, metres.
     pub probe_tip_radius_m: f64,
 }
 
+/// The tanker's flight: straight and level at constant airspeed.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct TankerSpec {
+    /// True airspeed, metres per second (sets the gusts' time scale).
     pub airspeed_mps: f64,
+    /// Altitude above the origin, metres (sets the gusts' strength).
     pub altitude_m: f64,
+    /// Heading, degrees from north toward east.
     pub heading_deg: f64,
 }
 
@@ -112,26 +141,36 @@ pub struct TankerSpec {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct DrogueSpec {
+    /// Radius of the dark inner circle (the measured target), metres.
     pub inner_radius_m: f64,
+    /// Radius of the canopy's outer rim, metres.
     pub canopy_radius_m: f64,
     /// Steady drogue centre relative to the tanker, tanker axes (fwd, right, down).
     pub trail_offset_m: [f64; 3],
     /// Hose exit on the tanker, tanker axes.
     pub hose_exit_m: [f64; 3],
+    /// Hose radius, metres.
     pub hose_radius_m: f64,
     /// Struts across the canopy (0 = none).
     pub struts: u32,
+    /// Width of a strut, metres.
     pub strut_width_m: f64,
     /// Width of the darker rim band at the canopy edge.
     pub rim_width_m: f64,
     /// Rotation of the strut pattern, degrees.
     pub roll_deg: f64,
-    /// Relative radiances (0..1) of the parts.
+    /// Radiance of the dark inner disc, 0..1 (all radiances relative:
+    /// digital number = 255 * gain * radiance).
     pub disc_radiance: f64,
+    /// Radiance of the canopy's light fabric, 0..1.
     pub canopy_radiance: f64,
+    /// Radiance of the rim band, 0..1.
     pub rim_radiance: f64,
+    /// Radiance of the struts, 0..1.
     pub strut_radiance: f64,
+    /// Radiance of the hose, 0..1.
     pub hose_radiance: f64,
+    /// Radiance of the probe, 0..1.
     pub probe_radiance: f64,
 }
 
@@ -151,6 +190,7 @@ pub struct TurbulenceSpec {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct BowWaveSpec {
+    /// Whether the bow wave pushes the drogue at all.
     pub enabled: bool,
     /// Push at zero separation on the probe axis, metres.
     pub max_push_m: f64,
@@ -164,9 +204,13 @@ pub struct BowWaveSpec {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct WhipSpec {
+    /// Whether a missed contact sets the hose whipping.
     pub enabled: bool,
+    /// Whip amplitude along the miss direction at the miss, metres.
     pub amplitude_m: f64,
+    /// Whip frequency, Hz.
     pub frequency_hz: f64,
+    /// Time constant of the whip's decay, seconds.
     pub damping_s: f64,
     /// The probe tip must pass within this of the drogue centre to couple.
     pub capture_radius_m: f64,
@@ -180,17 +224,25 @@ pub struct WhipSpec {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct ReceiverSpec {
+    /// Probe tip offset from the drogue at the approach's start, tanker axes, metres.
     pub start_offset_m: [f64; 3],
+    /// Probe tip offset from the drogue at the approach's end, tanker axes, metres.
     pub end_offset_m: [f64; 3],
+    /// Start of the approach, seconds from the run's start.
     pub approach_start_s: f64,
+    /// End of the approach, seconds from the run's start.
     pub approach_end_s: f64,
+    /// Lag of the pilot following the drogue's sideways motion, seconds (0 = not at all).
     pub tracking_lag_s: f64,
-    /// Trim attitude relative to the tanker's heading, degrees.
+    /// Trim roll relative to the tanker, degrees.
     pub roll_deg: f64,
+    /// Trim pitch relative to the tanker, degrees.
     pub pitch_deg: f64,
+    /// Trim yaw relative to the tanker's heading, degrees.
     pub yaw_deg: f64,
-    /// Attitude wobble amplitude (degrees) and frequency (Hz).
+    /// Attitude wobble amplitude, degrees.
     pub wobble_deg: f64,
+    /// Attitude wobble frequency, Hz.
     pub wobble_hz: f64,
 }
 
@@ -198,19 +250,25 @@ pub struct ReceiverSpec {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct SceneSpec {
+    /// Sky radiance at the zenith, 0..1.
     pub sky_zenith: f64,
+    /// Sky radiance at the horizon, 0..1.
     pub sky_horizon: f64,
     /// Radiance of the undercast below the horizon.
     pub ground: f64,
-    /// Cloud cover 0..1 and brightness.
+    /// Cloud cover, 0..1.
     pub cloud_cover: f64,
+    /// Radiance of the clouds, 0..1.
     pub cloud_radiance: f64,
+    /// Sun azimuth, degrees from north toward east.
     pub sun_azimuth_deg: f64,
+    /// Sun elevation above the horizon, degrees.
     pub sun_elevation_deg: f64,
     /// Strength of lens glare from the sun (0 = none).
     pub glare: f64,
     /// Haze 0..1: mixes object radiance toward `haze_radiance`.
     pub haze: f64,
+    /// Radiance the haze mixes toward, 0..1 (the haze's own brightness).
     pub haze_radiance: f64,
     /// Motion blur from the relative motion during exposure.
     pub motion_blur: bool,

@@ -17,6 +17,7 @@ const RIM_POINTS: usize = 360;
 /// Share of the inner rim that must be visible for `expect = detect`.
 pub const MIN_VISIBLE_RIM: f64 = 0.6;
 
+/// Renders a scenario frame by frame, each with its exact truth.
 pub struct Simulator {
     scenario: Scenario,
     camera: SimCamera,
@@ -32,6 +33,7 @@ pub struct Simulator {
 }
 
 impl Simulator {
+    /// A simulator at the scenario's first frame; fails on an unusable camera.
     pub fn new(scenario: Scenario) -> Result<Simulator, SimError> {
         let camera = scenario.camera_model()?;
         let m = &scenario.mount;
@@ -70,10 +72,12 @@ impl Simulator {
         })
     }
 
+    /// The scenario being run.
     pub fn scenario(&self) -> &Scenario {
         &self.scenario
     }
 
+    /// The simulated camera (intrinsics and distortion).
     pub fn camera(&self) -> &SimCamera {
         &self.camera
     }
@@ -83,26 +87,32 @@ impl Simulator {
         self.camera.ros_yaml("drogue_sim")
     }
 
+    /// Where the camera and the probe sit on the receiver.
     pub fn mount(&self) -> &MountSpec {
         &self.scenario.mount
     }
 
+    /// Frame rate, frames per second.
     pub fn fps(&self) -> f64 {
         self.scenario.fps
     }
 
+    /// Frames in the whole run (duration times frame rate).
     pub fn frame_count(&self) -> u64 {
         self.frame_count
     }
 
+    /// Capture time of frame 0, ns since the Unix epoch.
     pub fn start_time_ns(&self) -> u64 {
         self.scenario.start_time_ns
     }
 
+    /// Radius of the drogue's inner circle, metres.
     pub fn inner_radius_m(&self) -> f64 {
         self.scenario.drogue.inner_radius_m
     }
 
+    /// Radius of the canopy's outer rim, metres.
     pub fn canopy_radius_m(&self) -> f64 {
         self.scenario.drogue.canopy_radius_m
     }

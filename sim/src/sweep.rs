@@ -76,6 +76,7 @@ pub enum Factor {
 }
 
 impl Factor {
+    /// The factor in words, for reports.
     pub fn name(self) -> &'static str {
         match self {
             Factor::Baseline => "baseline",
@@ -110,11 +111,14 @@ impl Factor {
 /// One row of the sweep: a factor at one setting.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Level {
+    /// What is varied.
     pub factor: Factor,
+    /// Its setting, in the factor's unit (see each [`Factor`]).
     pub value: f64,
 }
 
 impl Level {
+    /// A level of `factor` at `value`.
     pub const fn new(factor: Factor, value: f64) -> Level {
         Level { factor, value }
     }
@@ -182,30 +186,37 @@ pub fn standard_levels() -> Vec<Level> {
 pub struct DrogueTruth {
     /// Exact image ellipse of the inner circle, undistorted pixels.
     pub ellipse: TruthEllipse,
+    /// Inner circle centre, metres.
     pub position_camera: [f64; 3],
     /// Unit normal toward the camera.
     pub normal_camera: [f64; 3],
     /// The mirror pose imaging to the same ellipse.
     pub alt_position_camera: [f64; 3],
+    /// Normal of the mirror pose.
     pub alt_normal_camera: [f64; 3],
+    /// Distance to the inner circle's centre, metres.
     pub range_m: f64,
+    /// Angle between the drogue normal and the line of sight, degrees.
     pub tilt_deg: f64,
     /// Share of the inner rim hidden by the probe, 0..1.
     pub probe_rim_frac: f64,
     /// Share of the inner rim visible (in the image, not hidden), 0..1.
     pub visible_rim_frac: f64,
     /// Enough of the rim is visible for a detection to be expected
-    /// (the simulator's own rule, [`MIN_VISIBLE_RIM`]).
+    /// (the simulator's own rule, [`MIN_VISIBLE_RIM`](crate::simulator::MIN_VISIBLE_RIM)).
     pub expect_detect: bool,
 }
 
 /// One rendered sweep frame.
 #[derive(Clone, Debug)]
 pub struct SweepFrame {
+    /// The level the frame belongs to.
     pub level: Level,
+    /// Index of the frame within its level (seeds its randomness).
     pub index: u64,
     /// The camera the frame was rendered through.
     pub camera: SimCamera,
+    /// The rendered 8-bit image.
     pub image: GrayImage,
     /// `None` on drogue-free frames.
     pub drogue: Option<DrogueTruth>,
@@ -257,6 +268,7 @@ struct Settings {
 }
 
 impl Sweep {
+    /// A sweep whose frames are seeded from `seed`.
     pub fn new(seed: u64) -> Sweep {
         Sweep {
             seed,

@@ -30,23 +30,35 @@ use rand_chacha::ChaCha8Rng;
 /// Everything about the world at one instant.
 #[derive(Clone, Debug, PartialEq)]
 pub struct WorldState {
+    /// Time, seconds from the run's start.
     pub t: f64,
+    /// Tanker position, NED, metres.
     pub tanker_ned: V3,
+    /// Tanker attitude, tanker axes → NED.
     pub r_ned_tanker: M3,
     /// Inner circle centre, NED.
     pub drogue_ned: V3,
     /// Drogue axis pointing aft (downstream, toward the receiver), NED.
     pub drogue_aft_ned: V3,
+    /// Drogue velocity, NED, metres per second.
     pub drogue_velocity_ned: V3,
+    /// Where the hose leaves the tanker, NED, metres.
     pub hose_exit_ned: V3,
+    /// Receiver body origin, NED, metres.
     pub receiver_ned: V3,
+    /// Receiver attitude, body FRD → NED.
     pub r_ned_body: M3,
+    /// Receiver velocity, NED, metres per second.
     pub receiver_velocity_ned: V3,
     /// Sideways displacements of the drogue (right, down), metres.
     pub sway_m: [f64; 2],
+    /// The bow wave's push on the drogue (right, down), metres.
     pub bow_push_m: [f64; 2],
+    /// The hose whip's displacement of the drogue (right, down), metres.
     pub whip_m: [f64; 2],
+    /// The probe is in the drogue (contact made).
     pub coupled: bool,
+    /// A contact has been missed (the hose whips, the receiver backs off).
     pub missed: bool,
 }
 
@@ -91,6 +103,7 @@ pub fn bow_push(spec: &BowWaveSpec, drogue_t: &V3, tip_t: &V3, body_t: &V3) -> [
 }
 
 impl World {
+    /// The world at t = 0 of the scenario, its random processes seeded from it.
     pub fn new(sc: &Scenario) -> World {
         let mut rng = ChaCha8Rng::seed_from_u64(sc.seed);
         let dt = 1.0 / sc.fps;

@@ -28,10 +28,14 @@ const FT: f64 = 0.3048;
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Default)]
 #[serde(rename_all = "snake_case")]
 pub enum Intensity {
+    /// No gusts.
     #[default]
     None,
+    /// Light: exceeded with probability 1e-2.
     Light,
+    /// Moderate: exceeded with probability 1e-3.
     Moderate,
+    /// Severe: exceeded with probability 1e-5.
     Severe,
 }
 
@@ -146,6 +150,7 @@ impl SwayAxis {
         axis
     }
 
+    /// Advances the axis by one time step (`dt_s` of [`SwayAxis::new`]).
     pub fn step(&mut self, rng: &mut impl Rng) {
         self.state = self.phi * self.state + self.noise_sqrt * normal3(rng);
     }

@@ -61,8 +61,11 @@ pub struct ProcessArgs {
 /// What a `process` run did (printed on stderr at the end).
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct ProcessSummary {
+    /// Input frames, one JSON line each (readable or not).
     pub frames: usize,
+    /// Frames with a drogue detected.
     pub detected: usize,
+    /// Frames that could not be read or decoded (their lines carry `error`).
     pub unreadable: usize,
     /// Non-image files in the folder, not read.
     pub skipped: usize,
@@ -83,7 +86,12 @@ pub enum ProcessError {
     Setup(String),
     /// The output (JSON lines or the MCAP log) could not be written.
     #[error("writing {path}: {message}")]
-    Output { path: String, message: String },
+    Output {
+        /// The file that could not be written.
+        path: String,
+        /// The I/O error.
+        message: String,
+    },
 }
 
 fn progress_bar(len: u64) -> ProgressBar {

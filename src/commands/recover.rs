@@ -28,6 +28,8 @@ pub fn default_out(log: &Path) -> PathBuf {
     log.with_extension("recovered.mcap")
 }
 
+/// `recover`: copies what the log still holds into `--out` (default: beside
+/// it); the file written and what was found.
 pub fn run(args: &RecoverArgs) -> Result<(PathBuf, RecoverReport), LogError> {
     let out = args.out.clone().unwrap_or_else(|| default_out(&args.log));
     let report = recover(&args.log, &out)?;

@@ -28,6 +28,8 @@ pub fn default_out(log: &Path) -> PathBuf {
     PathBuf::from(s)
 }
 
+/// `review`: the log's report, with poses.csv and the plots written to `--out`
+/// (default: beside the log).
 pub fn run(args: &ReviewArgs) -> Result<ReviewReport, LogError> {
     let out = args.out.clone().unwrap_or_else(|| default_out(&args.log));
     review(&args.log, &out)

@@ -1,5 +1,5 @@
 //! `drogue-vision run`: the command line of the live pipeline
-//! ([`crate::pipeline::live`]) and its end-of-run report.
+//! (`crate::pipeline::live`) and its end-of-run report.
 
 use crate::config::{Config, VehiclePoseSource};
 use crate::log::LogHandle;

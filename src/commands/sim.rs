@@ -31,9 +31,11 @@ pub struct SimArgs {
 /// What a `sim` run wrote.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct SimSummary {
+    /// Frames rendered and written.
     pub frames: u64,
     /// Frames whose truth says the drogue should be detected.
     pub expect_detect: u64,
+    /// The output folder.
     pub out: PathBuf,
 }
 
@@ -45,7 +47,12 @@ pub enum SimCommandError {
     Setup(String),
     /// The output could not be written.
     #[error("writing {path}: {message}")]
-    Output { path: String, message: String },
+    Output {
+        /// The file or folder that could not be written.
+        path: String,
+        /// The I/O error.
+        message: String,
+    },
 }
 
 fn output_err(path: &Path, e: impl std::fmt::Display) -> SimCommandError {

@@ -35,7 +35,12 @@ pub enum Address {
     TcpIn(String),
     /// `serial:DEVICE:BAUD`: a UART; reopened with back-off when it fails or
     /// disappears.
-    Serial { device: String, baud: u32 },
+    Serial {
+        /// The serial device, e.g. `/dev/ttyAMA0`.
+        device: String,
+        /// Baud rate.
+        baud: u32,
+    },
 }
 
 impl fmt::Display for Address {

@@ -154,6 +154,7 @@ impl EventReceiver {
         lock(&self.0.events).len()
     }
 
+    /// No events waiting.
     pub fn is_empty(&self) -> bool {
         self.len() == 0
     }

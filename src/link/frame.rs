@@ -33,18 +33,26 @@ pub const BUFFER_CAP: usize = 8 * MAX_FRAME;
 /// A valid, accepted message.
 #[derive(Clone, Debug)]
 pub struct Incoming {
+    /// Sequence number, system and component of the sender.
     pub header: MavHeader,
+    /// The decoded message (`ardupilotmega` dialect).
     pub message: MavMessage,
+    /// The frame carried a signature (checked when a signing key is set).
     pub signed: bool,
 }
 
 /// What the decoder had to refuse since the last call, for the counters.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct DecodeCounts {
+    /// Frames decoded and passed on.
     pub accepted: u64,
+    /// Bytes skipped: no frame start, a bad CRC, or a frame cut off at the end.
     pub bad_bytes: u64,
+    /// MAVLink 1 frames, refused (the link speaks MAVLink 2 only).
     pub mavlink1: u64,
+    /// Frames whose signature failed (signing on).
     pub bad_signature: u64,
+    /// CRC-valid frames whose payload did not decode (an unknown message, or bad fields).
     pub bad_payload: u64,
     /// Bytes run through a CRC (accepted or not): the decoder's work.
     pub crc_bytes: u64,
@@ -153,6 +161,7 @@ pub struct FrameDecoder {
 }
 
 impl FrameDecoder {
+    /// An empty decoder.
     pub fn new() -> Self {
         Self {
             buf: Vec::with_capacity(BUFFER_CAP),
@@ -273,6 +282,7 @@ pub struct FrameEncoder {
 }
 
 impl FrameEncoder {
+    /// An encoder sending as `system_id`/`component_id`, sequence from 0.
     pub fn new(system_id: u8, component_id: u8) -> Self {
         Self {
             system_id,

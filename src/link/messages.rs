@@ -35,7 +35,7 @@
 //!   reset_counter = track_epoch (mod 256).
 //! - ODOMETRY: the same pose, frame_id MAV_FRAME_LOCAL_FRD (= D),
 //!   child_frame_id MAV_FRAME_BODY_FRD, q = q_D_body, velocities unknown
-//!   (NaN, velocity_covariance[0] = NaN), estimator MAV_ESTIMATOR_TYPE_VISION.
+//!   (NaN, `velocity_covariance[0]` = NaN), estimator MAV_ESTIMATOR_TYPE_VISION.
 //!
 //! - TARGET_RELATIVE (`target_relative`, id 511, MAVLink `development`
 //!   dialect, for PX4's vision_target_estimator): the drogue centre relative
@@ -79,7 +79,9 @@ use serde_json::{Value, json};
 /// `ardupilotmega` does not include). Both share the MAVLink 2 framing.
 #[derive(Clone, Debug)]
 pub enum Outbound {
+    /// A message of the `ardupilotmega` dialect.
     Ardupilot(MavMessage),
+    /// A message of the `development` dialect (TARGET_RELATIVE).
     Development(dev::MavMessage),
 }
 
@@ -90,6 +92,7 @@ impl From<MavMessage> for Outbound {
 }
 
 impl Outbound {
+    /// The message's MAVLink name, e.g. `LANDING_TARGET`.
     pub fn name(&self) -> &'static str {
         match self {
             Self::Ardupilot(m) => m.message_name(),
@@ -252,7 +255,7 @@ impl DroguePose {
         })
     }
 
-    pub fn q_body_drogue(&self) -> UnitQuaternion<f64> {
+    pub(crate) fn q_body_drogue(&self) -> UnitQuaternion<f64> {
         UnitQuaternion::from_rotation_matrix(&self.r_body_drogue)
     }
 

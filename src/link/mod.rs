@@ -22,18 +22,18 @@
 //! possible still sends its poses. There `max_rate_hz` is kept on the
 //! source's clock too (a measurement over the budget is not sent, counted
 //! as `rate_limited`), and [`LinkHandle::wait_handled`] lets the measurement
-//! wait until the link is done with each one ([`handoff`]) instead of
+//! wait until the link is done with each one (`handoff`) instead of
 //! handing over latest-wins. The protocol's own times (TIMESYNC, the
 //! autopilot's telemetry) stay on the wall clock.
 
 pub mod address;
-pub mod events;
+pub(crate) mod events;
 pub mod frame;
 mod handoff;
 pub mod messages;
 mod session;
-pub mod signing;
-pub mod stats;
+pub(crate) mod signing;
+pub(crate) mod stats;
 pub mod telemetry;
 mod transport;
 
@@ -137,10 +137,14 @@ pub struct LinkConfig {
 /// after the start are never errors: they are logged, counted and retried.
 #[derive(Debug, thiserror::Error)]
 pub enum LinkError {
+    /// The MAVLink address does not parse.
     #[error("mavlink connection {0}")]
     Address(String),
+    /// A `[link]` setting is unusable.
     #[error("[link] config: {0}")]
     Config(String),
+    /// The signing settings are unusable (a key file and a passphrase
+    /// both, or a key file that cannot be read).
     #[error("[link] signing: {0}")]
     Signing(String),
 }

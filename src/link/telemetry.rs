@@ -175,6 +175,7 @@ pub struct Telemetry {
     tolerance_ns: u64,
     attitude: Series<UnitQuaternion<f64>>,
     position: Series<Vector3<f64>>,
+    /// The autopilot's clock offset from ours (TIMESYNC).
     pub timesync: TimeSync,
 }
 

@@ -15,13 +15,13 @@ use std::path::PathBuf;
 pub enum ImageEncoding {
     /// `foxglove.RawImage`, mono8: cheapest on the CPU.
     Raw,
-    /// `foxglove.CompressedImage`, PNG ([`png_gray`]: Average filter,
+    /// `foxglove.CompressedImage`, PNG ([`png_gray`](super::png_gray): Average filter,
     /// Huffman-only deflate): under half the disk of raw on camera frames.
     Png,
     /// `foxglove.CompressedImage`, JPEG at `jpeg_quality`: lossy, every frame.
     Jpeg,
     /// PNG full frames every `full_frame_every`-th frame, and on every frame
-    /// a PNG crop around the drogue on `/camera/crop` ([`crop`]).
+    /// a PNG crop around the drogue on `/camera/crop` (`crop`).
     Crop,
 }
 
@@ -64,6 +64,7 @@ pub struct LogConfig {
     pub dir: PathBuf,
     /// File name prefix: `<prefix>_<UTC start>_<part>.mcap`.
     pub file_prefix: String,
+    /// How frames are stored: PNG, JPEG, raw, or crops around the drogue.
     pub image_encoding: ImageEncoding,
     /// JPEG quality of `image_encoding = "jpeg"` (1..=100).
     pub jpeg_quality: u8,

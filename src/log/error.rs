@@ -7,12 +7,27 @@ use std::path::{Path, PathBuf};
 /// Why the log could not be started, finished, recovered or read.
 #[derive(Debug, thiserror::Error)]
 pub enum LogError {
+    /// A `[log]` setting (or a review's output folder) is unusable.
     #[error("log config: {0}")]
     Config(String),
+    /// A file or folder could not be read, created or written.
     #[error("{path}: {message}")]
-    Io { path: PathBuf, message: String },
+    Io {
+        /// The file or folder.
+        path: PathBuf,
+        /// The I/O error.
+        message: String,
+    },
+    /// The input is not an MCAP log, or is damaged beyond reading.
     #[error("{path}: not a readable MCAP log: {message}")]
-    Format { path: PathBuf, message: String },
+    Format {
+        /// The input file.
+        path: PathBuf,
+        /// What the reader found wrong.
+        message: String,
+    },
+    /// The writer thread failed: it could not start, panicked, or the log
+    /// was already finished.
     #[error("log writer: {0}")]
     Writer(String),
     /// `recover` would have written less than the input holds.

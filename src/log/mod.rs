@@ -15,7 +15,7 @@
 //!
 //! `/camera/image` is PNG by default ([`png_gray`]); the opt-in long-flight
 //! modes are JPEG ([`topics::jpeg`]) and full frames at a lower rate with a
-//! crop around the drogue on every frame ([`crop`]).
+//! crop around the drogue on every frame (`crop`).
 //!
 //! Also here: the `[log]` config ([`LogConfig`]), the message reader every
 //! reader of a log uses ([`reader`]), start-up recovery and `recover`
@@ -23,7 +23,7 @@
 //! `/camera/image` is a frame source: `crate::source::replay`.
 
 mod config;
-pub mod crop;
+pub(crate) mod crop;
 mod error;
 mod layer;
 pub mod metadata;
@@ -33,7 +33,7 @@ pub mod reader;
 pub mod recover;
 pub mod review;
 mod send_stamps;
-pub mod storage;
+pub(crate) mod storage;
 pub mod topics;
 mod writer;
 

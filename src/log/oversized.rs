@@ -17,7 +17,7 @@
 //! Chunks go through unchanged (the reader streams them record by record)
 //! unless they can hold a record above the bound: a chunk whose records
 //! decompress to more than the bound and that fits the file is first walked
-//! once, streaming ([`walk_chunk`]: decompressed into a small buffer, every
+//! once, streaming (`walk_chunk`: decompressed into a small buffer, every
 //! record's bytes hashed and dropped, none held). When that walk finds
 //! records above the bound, checks the chunk's CRC and size, the chunk is
 //! handed to the reader as an uncompressed chunk of its other records,

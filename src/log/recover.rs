@@ -47,7 +47,9 @@ pub struct DamagedChunk {
     pub offset: u64,
     /// Log times the chunk header claims, ns.
     pub start_ns: u64,
+    /// End of that span, ns.
     pub end_ns: u64,
+    /// Why, in words: a CRC mismatch, a failed decompression, a broken record.
     pub reason: String,
     /// Messages copied from it (they parsed; their content is unverified).
     pub salvaged: u64,
@@ -85,6 +87,7 @@ pub struct RecoverReport {
     pub readable_by_reader: u64,
     /// Why the input ended early (None: it was complete).
     pub cut: Option<String>,
+    /// The chunks found damaged, in file order.
     pub damaged: Vec<DamagedChunk>,
     /// Bytes skipped between a damaged record and the next valid chunk.
     pub skipped_bytes: u64,

@@ -13,7 +13,9 @@ impl<T: Write + Seek + Send> WriteSeek for T {}
 /// An opened log file: the bytes go to `writer`; `sync` makes everything
 /// written and flushed so far durable (fsync/`sync_data`).
 pub struct StorageFile {
+    /// Where the log's bytes go.
     pub writer: Box<dyn WriteSeek>,
+    /// Makes what was written so far durable.
     pub sync: Box<dyn FnMut() -> io::Result<()> + Send>,
 }
 

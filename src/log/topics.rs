@@ -16,32 +16,47 @@ use foxglove::messages::{
 use foxglove::{Encode, Schema};
 use nalgebra::{Matrix3, Rotation3, UnitQuaternion, Vector3};
 
+/// The camera frames (PNG, JPEG or raw mono8; in crop mode every `full_frame_every`-th).
 pub const IMAGE: &str = "/camera/image";
+/// The camera's calibration, with every frame.
 pub const CALIBRATION: &str = "/camera/calibration";
 /// `image_encoding = "crop"`: the PNG crop around the drogue, every frame.
 pub const CROP: &str = "/camera/crop";
-/// JSON: where each `/camera/crop` lies in its frame ([`super::crop`]).
+/// JSON: where each `/camera/crop` lies in its frame (`super::crop`).
 pub const CROP_INFO: &str = "/camera/crop_info";
+/// Image annotations: the fitted ellipse, the rim points and the inliers.
 pub const ANNOTATIONS: &str = "/drogue/annotations";
+/// JSON: the per-frame record (`DetectionRecord`), every measured frame.
 pub const DETECTION: &str = "/drogue/detection";
+/// The drogue's pose in the camera frame, when detected.
 pub const POSE: &str = "/drogue/pose";
+/// Transforms body → camera, body → probe and camera → drogue.
 pub const TF: &str = "/tf";
+/// JSON: every MAVLink message sent.
 pub const MAVLINK_OUT: &str = "/mavlink/out";
+/// JSON: every MAVLink message received (within its own budget).
 pub const MAVLINK_IN: &str = "/mavlink/in";
+/// JSON: the simulator's `FrameTruth`, simulated frames only.
 pub const SIM_TRUTH: &str = "/sim/truth";
+/// Every tracing event of the run.
 pub const LOG: &str = "/log";
 /// JSON: the run's resource figures (CPU, memory, queue depths), every second.
 pub const STATS: &str = "/drogue/stats";
 
 /// frame_id of the camera frame (image, calibration, pose, transforms).
 pub const CAMERA_FRAME: &str = "camera";
+/// frame_id of the receiver's body frame (FRD).
 pub const BODY_FRAME: &str = "body";
+/// frame_id of the drogue frame (origin at the disc's centre, z along its normal).
 pub const DROGUE_FRAME: &str = "drogue";
+/// frame_id of the probe tip.
 pub const PROBE_FRAME: &str = "probe";
 
 /// A channel's schema and message encoding.
 pub struct ChannelSpec {
+    /// The message schema (protobuf descriptor or JSON schema).
     pub schema: Schema,
+    /// The messages' encoding (`protobuf` or `json`).
     pub message_encoding: &'static str,
 }
 

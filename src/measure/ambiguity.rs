@@ -209,7 +209,7 @@ pub fn canopy_support(
 ///
 /// The edge is an outward brightening (the band against the sky); when
 /// that leaves the rim without a say or its better solution below
-/// [`DARKENING_FALLBACK_BELOW`], the outward darkening of a band lifted by
+/// `DARKENING_FALLBACK_BELOW`, the outward darkening of a band lifted by
 /// haze above the sky is tried, and the polarity whose better solution has
 /// more support answers.
 pub fn canopy_supports(

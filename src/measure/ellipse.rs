@@ -12,21 +12,32 @@ use std::f64::consts::{FRAC_PI_2, PI};
 /// +v, in radians, in (-pi/2, pi/2].
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Ellipse {
+    /// Centre u, pixels.
     pub cx: f64,
+    /// Centre v, pixels.
     pub cy: f64,
+    /// Semi-major axis, pixels.
     pub a: f64,
+    /// Semi-minor axis, pixels (`b <= a`).
     pub b: f64,
+    /// Angle of the major axis from +u toward +v, radians, in (-pi/2, pi/2].
     pub theta: f64,
 }
 
 /// The conic `A u^2 + B u v + C v^2 + D u + E v + F = 0` (paper eq. 1).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Conic {
+    /// Coefficient of u^2.
     pub a: f64,
+    /// Coefficient of u v.
     pub b: f64,
+    /// Coefficient of v^2.
     pub c: f64,
+    /// Coefficient of u.
     pub d: f64,
+    /// Coefficient of v.
     pub e: f64,
+    /// Constant term.
     pub f: f64,
 }
 

@@ -38,10 +38,15 @@ pub struct DrogueConfig {
 /// module above it.
 #[derive(Clone, Debug)]
 pub struct MeasureConfig {
+    /// The target's geometry (`[drogue]`).
     pub drogue: DrogueConfig,
+    /// The camera's place on the receiver and the probe tip (`[mount]`).
     pub mount: mount::MountConfig,
+    /// Finding the rim points (`[detect]`).
     pub detect: detect::DetectConfig,
+    /// The robust ellipse fit (`[fit]`).
     pub fit: fit::FitConfig,
+    /// Tracking and continuity (`[track]`).
     pub track: track::TrackConfig,
 }
 
@@ -79,6 +84,7 @@ pub struct Detection {
     pub pose_camera: CirclePose,
     /// The other solution of the ambiguity while it is unresolved.
     pub alt_pose_camera: Option<CirclePose>,
+    /// How the ambiguity was settled.
     pub disambiguation: Disambiguation,
     /// Centre of the dark circle in body FRD, metres.
     pub position_body_m: Point<BodyFrd>,
@@ -90,6 +96,7 @@ pub struct Detection {
     pub position_cov_body_m2: Matrix3<f64>,
     /// One-sigma angular uncertainty of the normal, radians.
     pub normal_sigma_rad: f64,
+    /// Quality figures of the fit.
     pub quality: FitQuality,
     /// Incremented each time the track is lost and found again
     /// (MAVLink `reset_counter`).
@@ -103,31 +110,41 @@ pub struct Detection {
 /// Per-stage processing time of one frame, microseconds.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct StageTimes {
+    /// Detection: candidates, rim points, verification.
     pub detect_us: u32,
+    /// Ellipse fit of the rim points.
     pub fit_us: u32,
+    /// Circle pose, ambiguity, uncertainty and body frame.
     pub pose_us: u32,
+    /// The whole measurement of the frame.
     pub total_us: u32,
 }
 
 /// The result of measuring one frame.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Measurement {
+    /// Sequence number of the frame in its source.
     pub seq: u64,
     /// Capture time of the frame, ns since the Unix epoch.
     pub capture_time_ns: u64,
+    /// The drogue, when one was found.
     pub detection: Option<Detection>,
     /// The search was limited to a region around the predicted ellipse.
     pub tracked: bool,
+    /// Time spent on each stage.
     pub times: StageTimes,
 }
 
 /// Why a measurer could not be built.
 #[derive(Debug, thiserror::Error)]
 pub enum MeasureSetupError {
+    /// The mount's angles or positions are unusable.
     #[error("mount: {0}")]
     Mount(String),
+    /// The drogue's radii are unusable (need 0 < inner < canopy).
     #[error("drogue geometry: {0}")]
     Drogue(String),
+    /// The `[track]` settings are unusable.
     #[error("track: {0}")]
     Track(String),
 }
@@ -150,6 +167,8 @@ fn micros_since(t: Instant) -> u32 {
 }
 
 impl Measurer {
+    /// A measurer for frames of `camera`; fails on an unusable drogue, mount or
+    /// track configuration.
     pub fn new(camera: CameraModel, config: &MeasureConfig) -> Result<Self, MeasureSetupError> {
         let d = &config.drogue;
         if !(d.inner_radius_m > 0.0 && d.canopy_radius_m > d.inner_radius_m) {
@@ -177,10 +196,12 @@ impl Measurer {
         })
     }
 
+    /// The camera the frames come from.
     pub fn camera(&self) -> &CameraModel {
         &self.camera
     }
 
+    /// The camera's mount on the receiver (camera → body FRD).
     pub fn mount(&self) -> &mount::Mount {
         &self.mount
     }

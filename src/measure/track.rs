@@ -63,10 +63,13 @@ pub const CONTINUITY_POSITION_NOISE: f64 = 0.01;
 /// The tracker's decision for one frame.
 #[derive(Clone, Copy, Debug)]
 pub struct Choice {
+    /// The solution given, camera frame.
     pub pose: CirclePose,
     /// The other solution while unresolved.
     pub alternative: Option<CirclePose>,
+    /// How the ambiguity was settled.
     pub how: Disambiguation,
+    /// Incremented each time the track is lost and found again.
     pub track_epoch: u32,
 }
 
@@ -85,6 +88,8 @@ struct TrackState {
     resolved: bool,
 }
 
+/// The track across frames: predicts the next ellipse (the search
+/// window) and settles the ambiguity by the canopy, else by continuity.
 #[derive(Clone)]
 pub struct Tracker {
     max_gap_ns: u64,

@@ -73,8 +73,11 @@ pub enum RunError {
 /// What the run did.
 #[derive(Clone, Debug, Default)]
 pub struct RunSummary {
+    /// Frames the source delivered.
     pub frames: u64,
+    /// Frames measured.
     pub measured: u64,
+    /// Frames with a drogue detected.
     pub detected: u64,
     /// Frames not measured because the measurement was still busy.
     pub skipped: u64,
@@ -82,12 +85,15 @@ pub struct RunSummary {
     pub unreadable: u64,
     /// Times a paced source fell behind its frame rate and was re-anchored.
     pub source_late: u64,
+    /// The MCAP files written (more than one after rotation).
     pub log_files: Vec<PathBuf>,
     /// Log items lost (queue full or write errors).
     pub log_dropped: u64,
+    /// The link's counters at the end (`None`: no link was started).
     pub link: Option<LinkStats>,
     /// Closed loop: frames rendered with a held pose (the autopilot's was stale).
     pub vehicle_pose_held: u64,
+    /// The run was stopped by a signal (Ctrl-C, SIGTERM), not by the source's end.
     pub interrupted: bool,
     /// CPU, memory and queues (the `/drogue/stats` figures).
     pub resources: ResourceSummary,

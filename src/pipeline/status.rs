@@ -5,7 +5,7 @@
 //! (<https://no-color.org>).
 //!
 //! The figures come from counters the pipeline keeps anyway
-//! ([`PipelineMeters`]): nothing here is on the frame path.
+//! (`PipelineMeters`): nothing here is on the frame path.
 
 use super::meters::PipelineMeters;
 use crate::link::LinkHandle;
@@ -89,6 +89,8 @@ pub struct StatusReporter {
 }
 
 impl StatusReporter {
+    /// Starts the thread: on a terminal it redraws the status line in place
+    /// every second; elsewhere it logs the line every 10 s.
     pub fn spawn(vitals: Arc<PipelineMeters>, link: LinkHandle, log_dir: PathBuf) -> Self {
         let terminal = std::io::stderr().is_terminal();
         let colour = colour_allowed();
@@ -157,6 +159,7 @@ pub struct StderrWriter {
 }
 
 impl StderrWriter {
+    /// A writer that erases the status line first when stderr is a terminal.
     pub fn new() -> Self {
         Self {
             terminal: std::io::stderr().is_terminal(),

@@ -1,8 +1,8 @@
 //! Frame sources for `run`: the simulator, a folder of images, an MCAP log,
 //! a V4L2 camera.
 
-pub mod dir;
-pub mod mcap;
+pub(crate) mod dir;
+pub(crate) mod mcap;
 pub mod replay;
 pub mod sim;
 pub mod v4l;
@@ -28,11 +28,15 @@ pub enum SourceSpec {
 /// A source address that could not be used.
 #[derive(Debug, thiserror::Error)]
 pub enum SourceError {
+    /// Not of the form `KIND:WHAT` with a known kind; holds the address.
     #[error("source `{0}`: expected sim:NAME_OR_FILE, dir:PATH, mcap:PATH or v4l:/dev/videoN")]
     BadAddress(String),
+    /// The source could not be opened.
     #[error("source {source_name}: {message}")]
     Open {
+        /// The source as given (a scenario, folder, log or device).
         source_name: String,
+        /// Why it could not be opened.
         message: String,
     },
 }
@@ -60,7 +64,9 @@ impl std::str::FromStr for SourceSpec {
 /// gets the frame alone.
 #[derive(Clone, Debug)]
 pub struct Captured {
+    /// The frame, all the measurement sees.
     pub frame: Frame,
+    /// The simulator's exact truth of the frame; `None` from other sources.
     pub truth: Option<Box<drogue_sim::FrameTruth>>,
 }
 

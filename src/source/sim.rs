@@ -69,6 +69,7 @@ impl SimSource {
         &mut self.sim
     }
 
+    /// Radius of the scenario's inner circle, metres.
     pub fn inner_radius_m(&self) -> f64 {
         self.sim.inner_radius_m()
     }

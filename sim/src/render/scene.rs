@@ -9,10 +9,15 @@ use crate::geometry::{M3, V3};
 /// A tube (hose, probe): axis segment a -> b in the camera frame, radii.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Tube {
+    /// Axis start, camera frame, metres.
     pub a: V3,
+    /// Axis end, camera frame, metres.
     pub b: V3,
+    /// Radius at `a`, metres.
     pub radius_a: f64,
+    /// Radius at `b`, metres.
     pub radius_b: f64,
+    /// Relative radiance 0..1.
     pub radiance: f64,
 }
 
@@ -56,33 +61,48 @@ impl Tube {
 /// The drogue in the camera frame.
 #[derive(Clone, Copy, Debug)]
 pub struct DrogueView {
+    /// Centre of the inner circle, camera frame, metres.
     pub centre: V3,
     /// Unit normal toward the camera.
     pub normal: V3,
     /// In-plane basis; struts are laid out from `e1`.
     pub e1: V3,
+    /// Second in-plane axis, `normal` x `e1`.
     pub e2: V3,
+    /// Radius of the dark inner circle, metres.
     pub inner_radius: f64,
+    /// Radius of the canopy's outer rim, metres.
     pub canopy_radius: f64,
+    /// Width of the darker band at the canopy's edge, metres.
     pub rim_width: f64,
+    /// Number of struts across the canopy (0 = none).
     pub struts: u32,
+    /// Width of a strut, metres.
     pub strut_width: f64,
+    /// Radiance of the inner disc, 0..1.
     pub disc: f64,
+    /// Radiance of the canopy, 0..1.
     pub canopy: f64,
+    /// Radiance of the rim band, 0..1.
     pub rim: f64,
+    /// Radiance of the struts, 0..1.
     pub strut: f64,
 }
 
 /// Everything one frame needs, in the camera frame.
 #[derive(Clone, Debug)]
 pub struct FrameScene {
+    /// The drogue.
     pub drogue: DrogueView,
+    /// The hose behind the drogue, if in front of the camera.
     pub hose: Option<Tube>,
+    /// The receiver's probe, if in front of the camera.
     pub probe: Option<Tube>,
     /// Camera -> NED rotation (for the sky).
     pub r_ned_cam: M3,
     /// Image motion of the drogue during the exposure, pixels.
     pub blur_px: [f64; 2],
+    /// Seed of this frame's sensor noise.
     pub noise_seed: u64,
     /// Leave the drogue out (drogue-free frames); default false.
     pub without_drogue: bool,
@@ -97,17 +117,33 @@ pub struct FrameScene {
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum DecalShape {
     /// A disc (a dark disc without a canopy, a blob, a balloon).
-    Disc { radius: f64 },
+    Disc {
+        /// Radius, metres.
+        radius: f64,
+    },
     /// An annulus between two radii (a dark ring without a canopy).
-    Ring { inner: f64, outer: f64 },
+    Ring {
+        /// Inner radius, metres.
+        inner: f64,
+        /// Outer radius, metres.
+        outer: f64,
+    },
     /// A rectangle with half-sizes along `e1` and `e2`.
-    Rect { half_1: f64, half_2: f64 },
+    Rect {
+        /// Half-size along `e1`, metres.
+        half_1: f64,
+        /// Half-size along `e2`, metres.
+        half_2: f64,
+    },
     /// An irregular blob: radius `radius * (1 + wobble * w(phi))` with
     /// w a fixed mix of the 2nd and 3rd harmonics (|w| <= 1) turned by
     /// `phase` radians; `wobble` within 0..0.5.
     Blob {
+        /// Mean radius, metres.
         radius: f64,
+        /// Relative size of the wobble, 0..0.5.
         wobble: f64,
+        /// Turn of the wobble pattern, radians.
         phase: f64,
     },
 }
@@ -118,10 +154,15 @@ pub enum DecalShape {
 /// and they are neither blurred nor shaded, but hazed like every object.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Decal {
+    /// A point of the plane (the shape's centre), camera frame, metres.
     pub centre: V3,
+    /// Unit normal of the plane, camera frame.
     pub normal: V3,
+    /// First in-plane axis (unit).
     pub e1: V3,
+    /// Second in-plane axis (unit).
     pub e2: V3,
+    /// The outline in the plane.
     pub shape: DecalShape,
     /// Relative radiance 0..1.
     pub radiance: f64,
@@ -214,18 +255,32 @@ pub struct GlareStreak {
 /// Scene-wide look (from the scenario).
 #[derive(Clone, Debug)]
 pub struct Look {
+    /// Sky radiance at the zenith, 0..1.
     pub sky_zenith: f64,
+    /// Sky radiance at the horizon, 0..1.
     pub sky_horizon: f64,
+    /// Radiance of the undercast below the horizon, 0..1.
     pub ground: f64,
+    /// Cloud cover, 0..1.
     pub cloud_cover: f64,
+    /// Radiance of the clouds, 0..1.
     pub cloud_radiance: f64,
+    /// Unit direction toward the sun, NED.
     pub sun_ned: V3,
+    /// Strength of lens glare from the sun (0 = none).
     pub glare: f64,
+    /// Haze 0..1: mixes object radiance toward `haze_radiance`.
     pub haze: f64,
+    /// Radiance the haze mixes toward, 0..1.
     pub haze_radiance: f64,
+    /// Exposure gain: digital number = 255 * gain * radiance.
     pub gain: f64,
+    /// Read noise, digital numbers (RMS).
     pub read_noise_dn: f64,
+    /// Shot noise: variance in DN^2 per DN of signal.
     pub shot_noise_dn: f64,
+    /// Vignetting: relative fall-off at the image corner (0 = none).
     pub vignette: f64,
+    /// Seed of the cloud pattern.
     pub cloud_seed: u32,
 }

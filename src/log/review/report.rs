@@ -11,6 +11,7 @@ use std::path::PathBuf;
 /// The run's resources, from its `/drogue/stats` records.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct ResourceReview {
+    /// `/drogue/stats` records read (one a second).
     pub samples: u64,
     /// Pipeline CPU (the process less the source and the log writer) over
     /// the whole run, % of one core.
@@ -21,15 +22,20 @@ pub struct ResourceReview {
     pub source_cpu_pct: f64,
     /// The log writer's CPU (encoding, compression, writing), % of one core.
     pub log_writer_cpu_pct: f64,
+    /// Largest resident memory of the process, bytes.
     pub peak_rss_bytes: u64,
+    /// Deepest the log queue got, items.
     pub max_log_queue: u64,
+    /// The log queue's depth at the last record, items.
     pub last_log_queue: u64,
+    /// Deepest the link's event queue got, items.
     pub max_link_event_queue: u64,
 }
 
 /// Everything the review found.
 #[derive(Debug, Default)]
 pub struct ReviewReport {
+    /// The log reviewed.
     pub log: PathBuf,
     /// Why reading stopped early (a cut-short log), if it did.
     pub cut: Option<String>,
@@ -39,22 +45,28 @@ pub struct ReviewReport {
     /// (their frames or messages are missing from everything below), and
     /// their bytes.
     pub oversized_records: u64,
+    /// Bytes of those records.
     pub oversized_bytes: u64,
     /// The log's MCAP metadata records (name, key/values), in file order.
     pub metadata: Vec<(String, BTreeMap<String, String>)>,
     /// Log time span of all messages, ns.
     pub first_ns: Option<u64>,
+    /// End of that span, ns.
     pub last_ns: Option<u64>,
     /// Capture times of the first and last frame, ns.
     pub first_frame_ns: Option<u64>,
+    /// Capture time of the last frame, ns.
     pub last_frame_ns: Option<u64>,
+    /// Frames on `/camera/image`.
     pub frames: u64,
     /// Frames missing from `/camera/image` (gaps in the sequence numbers,
     /// counting only the frames the log's mode keeps).
     pub frames_lost: u64,
     /// `image_encoding = "crop"`: a full frame every this many (1 otherwise).
     pub full_frame_every: u64,
+    /// Records on `/drogue/detection` (one per measured frame).
     pub measurements: u64,
+    /// Of those, frames with a drogue detected.
     pub detected: u64,
     /// Measurement time per frame, ms.
     pub processing_ms: Histogram,
@@ -62,22 +74,33 @@ pub struct ReviewReport {
     pub latency_ms: Histogram,
     /// The log is on the source's clock (`run --fast`): no latency in it.
     pub source_clock: bool,
+    /// MAVLink messages sent, by name.
     pub mavlink_out: BTreeMap<String, u64>,
+    /// MAVLink messages received, by name.
     pub mavlink_in: BTreeMap<String, u64>,
+    /// HEARTBEATs received from the autopilot.
     pub heartbeats_in: u64,
     /// Times the autopilot's heartbeat stopped for more than 3 s.
     pub link_losses: u64,
+    /// Longest time between two received heartbeats, seconds.
     pub longest_heartbeat_gap_s: f64,
+    /// Warning events on `/log`.
     pub warnings: u64,
+    /// Error events on `/log`.
     pub errors: u64,
+    /// The first warnings and errors, quoted (`target: message`), and unreadable records.
     pub problems: Vec<String>,
     /// Items the log writer reported dropped (queue full + write errors).
     pub log_dropped: u64,
+    /// Measured frames with a simulator truth to compare with.
     pub truth_frames: u64,
+    /// Detection and accuracy against the truth, by range bin.
     pub by_range: Vec<RangeBin>,
     /// From `/drogue/stats` (logs of `run`).
     pub resources: Option<ResourceReview>,
+    /// The files the review wrote (poses.csv, the plots).
     pub files_written: Vec<PathBuf>,
+    /// Why the plots could not be drawn, if they could not.
     pub plot_error: Option<String>,
     #[doc(hidden)]
     pub(crate) series: Vec<PlotPoint>,
@@ -96,6 +119,7 @@ impl ReviewReport {
             _ => 0.0,
         }
     }
+    /// Share of the measured frames with a drogue detected, 0..1.
     pub fn detection_rate(&self) -> f64 {
         if self.measurements == 0 {
             0.0

@@ -17,6 +17,7 @@ pub struct Histogram {
 }
 
 impl Histogram {
+    /// Counts one sample, ms; negative or non-finite ones are left out.
     pub fn add(&mut self, ms: f64) {
         if !ms.is_finite() || ms < 0.0 {
             return;
@@ -30,10 +31,12 @@ impl Histogram {
         self.max = self.max.max(ms);
     }
 
+    /// Samples counted.
     pub fn count(&self) -> u64 {
         self.count
     }
 
+    /// Largest sample, ms (exact, even beyond the bins); 0 when empty.
     pub fn max(&self) -> f64 {
         self.max
     }
@@ -75,25 +78,35 @@ impl Histogram {
 /// Errors against truth for one range interval.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct RangeBin {
+    /// Lower edge of the interval, metres (inclusive).
     pub lo_m: f64,
+    /// Upper edge of the interval, metres (exclusive).
     pub hi_m: f64,
+    /// Frames with a truth range in the interval.
     pub frames: u64,
+    /// Of those, frames detected (the error sums are over these).
     pub detected: u64,
+    /// Sum of the position errors, metres.
     pub sum_pos_err_m: f64,
+    /// Sum of the squared position errors, square metres.
     pub sum_pos_err2_m2: f64,
+    /// Largest position error, metres.
     pub max_pos_err_m: f64,
+    /// Sum of the normal's angular errors, degrees.
     pub sum_normal_err_deg: f64,
+    /// Largest angular error of the normal, degrees.
     pub max_normal_err_deg: f64,
 }
 
 impl RangeBin {
+    /// Mean position error over the detected frames, metres.
     pub fn mean_pos_err_m(&self) -> f64 {
         self.sum_pos_err_m / self.detected.max(1) as f64
     }
-    pub fn rms_pos_err_m(&self) -> f64 {
+    pub(crate) fn rms_pos_err_m(&self) -> f64 {
         (self.sum_pos_err2_m2 / self.detected.max(1) as f64).sqrt()
     }
-    pub fn mean_normal_err_deg(&self) -> f64 {
+    pub(crate) fn mean_normal_err_deg(&self) -> f64 {
         self.sum_normal_err_deg / self.detected.max(1) as f64
     }
 }

@@ -42,6 +42,7 @@ pub struct DetectConfig {
     pub max_candidates: u32,
     /// Range limits of the drogue, metres: they bound the disc's size in pixels.
     pub min_range_m: f64,
+    /// Farthest range of the drogue, metres (bounds the smallest disc).
     pub max_range_m: f64,
     /// Smallest minor/major axis ratio accepted (cos of the largest tilt).
     pub min_axis_ratio: f64,
@@ -57,6 +58,7 @@ pub struct DetectConfig {
     /// Half-width of the narrow rim search around a candidate ellipse, as a
     /// fraction of its radius, and at most this many pixels.
     pub rim_search_fraction: f64,
+    /// Cap of that half-width, pixels.
     pub rim_search_max_px: f64,
     /// Fewest rim points on the ellipse for a detection.
     pub min_rim_points: u32,
@@ -381,6 +383,7 @@ fn median(values: &mut [f64]) -> f64 {
 }
 
 impl Detector {
+    /// A detector for frames of `camera` and a drogue of these radii.
     pub fn new(cfg: &DetectConfig, camera: &CameraModel, drogue: canopy::DrogueCircles) -> Self {
         let inner_radius_m = drogue.inner_radius_m;
         let f = camera.fx().max(camera.fy());

@@ -42,6 +42,7 @@ pub struct RayEdge {
     pub s: f64,
     /// Local levels inside and outside the edge, gray levels.
     pub dark: f32,
+    /// Local level outside the edge, gray levels.
     pub light: f32,
     /// Distance from the ray's origin where the light level begins (the
     /// step's outer end), pixels.

@@ -1,7 +1,7 @@
 //! Ellipse fitting: the paper's least squares (A+C=1) and Algorithm 1, the
 //! fixed-threshold RANSAC the paper compares against, and our adaptive default.
 //!
-//! All methods share the same front end ([`Points`]): non-finite points are
+//! All methods share the same front end (`Points`): non-finite points are
 //! dropped (and flagged as outliers), and the rest are moved to their centroid
 //! and scaled to unit RMS radius, so that every algebraic fit is well
 //! conditioned whatever the pixel coordinates. Distances and thresholds are
@@ -36,6 +36,7 @@ pub enum FitMethod {
 }
 
 impl FitMethod {
+    /// Every method, the default first.
     pub const ALL: [FitMethod; 4] = [
         FitMethod::Adaptive,
         FitMethod::Algorithm1,
@@ -43,6 +44,7 @@ impl FitMethod {
         FitMethod::LeastSquares,
     ];
 
+    /// The method's name in the config (`[fit] method`).
     pub fn name(self) -> &'static str {
         match self {
             FitMethod::Adaptive => "adaptive",
@@ -58,6 +60,7 @@ impl FitMethod {
 #[derive(Clone, Debug, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct FitConfig {
+    /// Which fitter runs.
     pub method: FitMethod,
     /// Algorithm 1: number of random subsets N.
     pub algorithm1_subsets: usize,
@@ -196,8 +199,10 @@ impl FitConfig {
     }
 }
 
+/// A fitted ellipse and which points it kept.
 #[derive(Clone, Debug, PartialEq)]
 pub struct FitResult {
+    /// The ellipse, in the points' pixels.
     pub ellipse: Ellipse,
     /// One flag per input point: kept by the robust fit.
     pub inliers: Vec<bool>,
@@ -206,13 +211,17 @@ pub struct FitResult {
     pub rms_residual_px: f64,
 }
 
+/// Why no ellipse came out of a fit.
 #[derive(Debug, thiserror::Error, PartialEq)]
 pub enum FitError {
     /// Fewer than 5 usable (finite, distinct) points.
     #[error("too few points: {0}")]
     TooFewPoints(usize),
+    /// No ellipse fits the points (every candidate is degenerate, not an
+    /// ellipse, or without support).
     #[error("no ellipse fits the points")]
     NoEllipse,
+    /// A `[fit]` setting is unusable.
     #[error("invalid fit config: {0}")]
     Config(String),
 }

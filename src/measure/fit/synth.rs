@@ -29,7 +29,7 @@ pub enum Occluder {
 }
 
 impl Occluder {
-    pub const STRUCTURED: [Occluder; 4] = [
+    pub(crate) const STRUCTURED: [Occluder; 4] = [
         Occluder::Chord,
         Occluder::Wedge,
         Occluder::Tube,
@@ -40,6 +40,7 @@ impl Occluder {
 /// The recipe of one rim point set.
 #[derive(Clone, Debug)]
 pub struct RimSpec {
+    /// The ellipse the points are drawn from, pixels.
     pub truth: Ellipse,
     /// Ellipse parameter (radians) where the visible arc starts.
     pub visible_start: f64,
@@ -49,6 +50,7 @@ pub struct RimSpec {
     pub rim_points: usize,
     /// Standard deviation of the Gaussian noise on each coordinate, pixels.
     pub noise_px: f64,
+    /// What hides part of the visible arc.
     pub occluder: Occluder,
     /// Uniform outliers in the ellipse's bounding box (grown by half).
     pub scattered: usize,
@@ -57,12 +59,16 @@ pub struct RimSpec {
 /// A generated point set and which points are outliers.
 #[derive(Clone, Debug)]
 pub struct RimSet {
+    /// The ellipse the points were drawn from, pixels.
     pub truth: Ellipse,
+    /// The points, rim and outliers mixed, pixels.
     pub points: Vec<[f64; 2]>,
+    /// One flag per point: an outlier, not a rim point.
     pub outlier: Vec<bool>,
 }
 
 impl RimSet {
+    /// Share of the points that are outliers, 0..1.
     pub fn outlier_fraction(&self) -> f64 {
         self.outlier.iter().filter(|o| **o).count() as f64 / self.points.len().max(1) as f64
     }
@@ -209,7 +215,9 @@ pub struct Scenario {
     pub major_px: (f64, f64),
     /// Minor / major ratio (cos of the tilt).
     pub axis_ratio: (f64, f64),
+    /// Visible part of the rim, 0..=1 of the full turn.
     pub visible_fraction: (f64, f64),
+    /// Standard deviation of the points' noise, pixels.
     pub noise_px: (f64, f64),
     /// Occluders to choose from (uniformly).
     pub occluders: Vec<Occluder>,

@@ -10,6 +10,7 @@
 
 /// `V4L2_BUF_FLAG_TIMESTAMP_MASK` and the one type we convert.
 pub const TIMESTAMP_TYPE_MASK: u32 = 0x0000_e000;
+/// `V4L2_BUF_FLAG_TIMESTAMP_MONOTONIC`: the driver's time is CLOCK_MONOTONIC.
 pub const TIMESTAMP_MONOTONIC: u32 = 0x0000_2000;
 /// `V4L2_BUF_FLAG_ERROR`: the driver says the buffer's data may be corrupt.
 pub const BUFFER_FLAG_ERROR: u32 = 0x0000_0040;
@@ -20,8 +21,11 @@ const MAX_DRIVER_TIME_ERROR_NS: i128 = 1_000_000_000;
 /// One read of the two clocks, nanoseconds: MONOTONIC, REALTIME, MONOTONIC.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ClockRead {
+    /// MONOTONIC before the REALTIME read.
     pub monotonic_before_ns: i128,
+    /// REALTIME (Unix time).
     pub realtime_ns: i128,
+    /// MONOTONIC after the REALTIME read.
     pub monotonic_after_ns: i128,
 }
 
@@ -29,7 +33,9 @@ pub struct ClockRead {
 /// was read in (its uncertainty).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ClockOffset {
+    /// REALTIME - MONOTONIC, against the bracket's middle.
     pub realtime_minus_monotonic_ns: i128,
+    /// Half-width of the MONOTONIC bracket.
     pub uncertainty_ns: i128,
 }
 

@@ -54,8 +54,11 @@ impl std::fmt::Display for PixelFormat {
 /// What the driver granted: the layout of every buffer of the stream.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct BufferLayout {
+    /// The stream's pixel format.
     pub format: PixelFormat,
+    /// Frame width, pixels.
     pub width: u32,
+    /// Frame height, pixels.
     pub height: u32,
     /// Bytes from one row to the next (V4L2 `bytesperline`); 0: rows packed.
     pub stride_bytes: u32,
@@ -64,36 +67,61 @@ pub struct BufferLayout {
 /// A buffer that does not make a frame.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum ConvertError {
+    /// The layout has a zero width or height.
     #[error("{format} frame of {width}x{height}: empty size")]
     EmptySize {
+        /// The stream's pixel format.
         format: PixelFormat,
+        /// Frame width, pixels.
         width: u32,
+        /// Frame height, pixels.
         height: u32,
     },
+    /// The row stride is shorter than a row of pixels.
     #[error("{format} frame of {width}x{height}: row stride {stride} bytes is less than a row")]
     StrideTooSmall {
+        /// The stream's pixel format.
         format: PixelFormat,
+        /// Frame width, pixels.
         width: u32,
+        /// Frame height, pixels.
         height: u32,
+        /// Bytes from one row to the next.
         stride: u32,
     },
+    /// The buffer holds fewer bytes than the frame's rows need.
     #[error("{format} frame of {width}x{height}: buffer holds {got} bytes, the frame needs {need}")]
     ShortBuffer {
+        /// The stream's pixel format.
         format: PixelFormat,
+        /// Frame width, pixels.
         width: u32,
+        /// Frame height, pixels.
         height: u32,
+        /// Bytes in the buffer.
         got: usize,
+        /// Bytes the frame needs.
         need: usize,
     },
+    /// The JPEG lacks its end-of-image marker (a frame cut short).
     #[error("MJPG frame is incomplete (no end-of-image marker): {got} bytes")]
-    JpegIncomplete { got: usize },
+    JpegIncomplete {
+        /// Bytes in the buffer.
+        got: usize,
+    },
+    /// The JPEG decoder refused the frame; holds its message.
     #[error("MJPG frame does not decode: {0}")]
     JpegDecode(String),
+    /// The JPEG decodes to another size than the stream's.
     #[error("MJPG frame is {got_width}x{got_height}, the stream was set up for {width}x{height}")]
     JpegSize {
+        /// The decoded width, pixels.
         got_width: u32,
+        /// The decoded height, pixels.
         got_height: u32,
+        /// The stream's width, pixels.
         width: u32,
+        /// The stream's height, pixels.
         height: u32,
     },
 }

@@ -22,11 +22,13 @@ const DROP_REPORT_INTERVAL: Duration = Duration::from_secs(5);
 /// metadata, copied out of the driver's memory.
 #[derive(Clone, Debug)]
 pub struct RawBuffer {
+    /// The frame, or why the buffer does not make one.
     pub image: Result<GrayImage, String>,
     /// V4L2 buffer flags (timestamp type, error).
     pub flags: u32,
     /// The driver's timestamp, as in `struct timeval`.
     pub seconds: i64,
+    /// The microseconds part of the driver's timestamp.
     pub microseconds: i64,
     /// The driver's frame counter.
     pub sequence: u32,
@@ -47,7 +49,9 @@ pub trait Camera: Send {
 
 /// Opens the camera (again).
 pub trait CameraOpener: Send {
+    /// The camera it opens.
     type Camera: Camera;
+    /// Opens the device and starts streaming; an error leaves it for a later attempt.
     fn open(&mut self) -> Result<Self::Camera, String>;
     /// REALTIME - MONOTONIC now, to convert the driver's timestamps.
     fn clock_offset(&self) -> Option<ClockOffset>;
@@ -56,11 +60,17 @@ pub trait CameraOpener: Send {
 /// Figures of a live source, logged when it closes.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct LiveStats {
+    /// Frames delivered.
     pub frames: u64,
+    /// Frames the driver dropped (gaps in its sequence numbers).
     pub dropped_by_driver: u64,
+    /// Buffers that did not make a frame (reported and skipped).
     pub unreadable: u64,
+    /// Times the camera was lost (an error or no frame within the timeout).
     pub losses: u64,
+    /// Times it was opened again after a loss.
     pub reopens: u64,
+    /// Frames stamped with the dequeue time, the driver's time not being usable.
     pub stamped_at_dequeue: u64,
 }
 
@@ -113,6 +123,7 @@ impl<O: CameraOpener> LiveSource<O> {
         })
     }
 
+    /// The figures so far.
     pub fn stats(&self) -> LiveStats {
         LiveStats {
             dropped_by_driver: self.sequence.dropped(),

@@ -19,8 +19,11 @@ use serde::{Deserialize, Serialize};
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(try_from = "SettingText", into = "SettingText")]
 pub enum ControlSetting {
+    /// The camera's automatic mode (auto exposure, auto gain).
     Auto,
+    /// Left as the driver has it: not set at all.
     Driver,
+    /// A manual value, in the control's own units.
     Value(i32),
 }
 
@@ -66,7 +69,9 @@ impl From<ControlSetting> for SettingText {
 pub struct V4lConfig {
     /// Pixel formats in order of preference; the first one the camera offers is used.
     pub formats: Vec<PixelFormat>,
+    /// Frame width, pixels (must match the calibration).
     pub width: u32,
+    /// Frame height, pixels (must match the calibration).
     pub height: u32,
     /// Frames per second asked for.
     pub fps: f64,
@@ -81,6 +86,7 @@ pub struct V4lConfig {
     pub frame_timeout_ms: u64,
     /// Back-off between attempts to reopen a lost camera, from min doubling to max, ms.
     pub reopen_min_ms: u64,
+    /// Longest back-off between reopen attempts, ms.
     pub reopen_max_ms: u64,
 }
 
@@ -133,6 +139,7 @@ pub struct Backoff {
 }
 
 impl Backoff {
+    /// The back-off of the config, starting at `reopen_min_ms`.
     pub fn new(config: &V4lConfig) -> Self {
         let min = std::time::Duration::from_millis(config.reopen_min_ms);
         Self {
