@@ -85,12 +85,12 @@ pub struct RimEdge<'a> {
     /// Motion blur widens both rims alike along its direction: there the
     /// brightening is taken over that width (2 px at least) and its place
     /// is known to a quarter of it; where the disc's step is wider than
-    /// [`MAX_JUDGED_WIDTH_RADII`] of the canopy rim's radius the thin rim
+    /// `MAX_JUDGED_WIDTH_RADII` of the canopy rim's radius the thin rim
     /// is smeared out and not judged.
     pub widths: &'a [(f64, f64)],
     /// The disc's rim mid level by direction: (image angle about the
     /// ellipse's centre, radians; gray level). The polarity-free test
-    /// ([`outer_edge_offset`]) counts a ray only where the canopy between
+    /// (`outer_edge_offset`) counts a ray only where the canopy between
     /// the disc and the predicted rim is lighter than this: a dark shape
     /// next to the candidate (a blob's other arm, the probe) is not canopy.
     pub mids: &'a [(f64, f32)],
@@ -117,7 +117,7 @@ fn nearest<T>(by_angle: &[(f64, T)], angle: f64) -> Option<&(f64, T)> {
 /// The canopy evidence of a candidate: the larger of its two poses'
 /// shares of judged rim points with an outward brightening of at least
 /// `edge.min_step_gray` near the predicted rim. `None` when neither pose can
-/// be judged (degenerate ellipse, fewer than [`MIN_JUDGED`] points in the
+/// be judged (degenerate ellipse, fewer than `MIN_JUDGED` points in the
 /// image).
 pub fn ring_support(
     image: &GrayImage,

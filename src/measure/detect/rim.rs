@@ -193,7 +193,7 @@ fn inside_prefix(n: usize, inside: impl Fn(usize) -> bool) -> usize {
 const NOISE_ROW_STRIDE: usize = 16;
 
 /// The image noise's standard deviation, gray levels: the median absolute
-/// second difference along every [`NOISE_ROW_STRIDE`]th row, scaled to the
+/// second difference along every `NOISE_ROW_STRIDE`th row, scaled to the
 /// deviation of white noise (a second difference of it has variance
 /// `6 sigma^2`; 1.4826 turns a median absolute value into a deviation).
 /// Second differences ignore the sky's gradients and vignetting; the median

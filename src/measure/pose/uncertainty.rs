@@ -232,7 +232,7 @@ pub fn pose_uncertainty(
 
 /// [`pose_uncertainty`] with the inlier points' step widths (pixels, one per
 /// point, as the detector measured them): adds the blurred edges'
-/// systematic displacement (see [`SYSTEMATIC_CURVATURE_FACTOR`]), which no
+/// systematic displacement (see `SYSTEMATIC_CURVATURE_FACTOR`), which no
 /// residual shows. The measurement passes them; without them (`None`, or a
 /// slice of another length) only the points' scatter (independent,
 /// neighbour-correlated and common parts) is counted.

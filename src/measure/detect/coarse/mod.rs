@@ -3,138 +3,16 @@
 //! Several thresholds because the disc merges with the probe (which is a
 //! little lighter) at a high threshold, and a shaded disc breaks up at a low
 //! one; the full-resolution verification decides among them.
+//!
+//! `decimate`: the block-mean frame the search runs on; this module: the
+//! run-length labelling of its dark regions and their moments; `ridge`:
+//! each kept region's deepest point and its point best ringed by light.
 
-use image::GrayImage;
+mod decimate;
+mod ridge;
 
-/// Block-mean decimation of a frame, reusing its buffer.
-#[derive(Clone, Default)]
-pub struct Decimated {
-    pub width: usize,
-    pub height: usize,
-    pub factor: usize,
-    pub pixels: Vec<u8>,
-    /// Scratch: column sums of one block row.
-    column_sums: Vec<u16>,
-}
-
-impl Decimated {
-    /// Averages `factor` x `factor` blocks (partial blocks at the right and
-    /// bottom edges are dropped).
-    #[inline(never)]
-    pub fn update(&mut self, image: &GrayImage, factor: usize) {
-        // u16 column sums hold up to 257 rows of 255.
-        let factor = factor.clamp(1, 256);
-        let (w, h) = (image.width() as usize, image.height() as usize);
-        self.factor = factor;
-        self.width = w / factor;
-        self.height = h / factor;
-        // Every pixel is written below: no need to zero a buffer of the
-        // right size.
-        if self.pixels.len() != self.width * self.height {
-            self.pixels.clear();
-            self.pixels.resize(self.width * self.height, 0);
-        }
-        if self.width == 0 || self.height == 0 {
-            return;
-        }
-        let raw = image.as_raw();
-        // Column sums of a block row first (u16: at most 16 x 255), a loop
-        // the compiler vectorises, then the sums of `factor` columns.
-        let used = self.width * factor;
-        self.column_sums.clear();
-        self.column_sums.resize(used, 0);
-        let area = (factor * factor) as u32;
-        if factor == 4 {
-            self.update_by_4(raw, w);
-            return;
-        }
-        for by in 0..self.height {
-            let top = by * factor;
-            let first = &raw[top * w..top * w + used];
-            for (s, &p) in self.column_sums.iter_mut().zip(first) {
-                *s = u16::from(p);
-            }
-            for y in top + 1..top + factor {
-                let row = &raw[y * w..y * w + used];
-                for (s, &p) in self.column_sums.iter_mut().zip(row) {
-                    *s += u16::from(p);
-                }
-            }
-            let out = &mut self.pixels[by * self.width..(by + 1) * self.width];
-            if factor == 4 {
-                // The default, unrolled: a rounded division by 16.
-                for (o, b) in out.iter_mut().zip(self.column_sums.chunks_exact(4)) {
-                    let s = u32::from(b[0]) + u32::from(b[1]) + u32::from(b[2]) + u32::from(b[3]);
-                    *o = ((s + 8) >> 4) as u8;
-                }
-            } else {
-                for (o, block) in out.iter_mut().zip(self.column_sums.chunks_exact(factor)) {
-                    let s: u32 = block.iter().map(|&v| u32::from(v)).sum();
-                    *o = ((s + area / 2) / area) as u8;
-                }
-            }
-        }
-    }
-
-    /// The default factor 4, eight columns (two blocks) at a time in a u64:
-    /// the sums of pixel pairs of the four rows in u16 lanes (at most
-    /// 8 x 255), then of lane pairs in u32 lanes (a block's sum), with a
-    /// rounded division by 16. The same means as the general loop.
-    fn update_by_4(&mut self, raw: &[u8], w: usize) {
-        const BYTES: u64 = 0x00ff_00ff_00ff_00ff;
-        const HALVES: u64 = 0x0000_ffff_0000_ffff;
-        let used = self.width * 4;
-        let pairs = |chunk: &[u8]| {
-            let mut bytes = [0u8; 8];
-            bytes.copy_from_slice(chunk);
-            let v = u64::from_le_bytes(bytes);
-            (v & BYTES) + ((v >> 8) & BYTES)
-        };
-        for (by, out) in self.pixels.chunks_exact_mut(self.width).enumerate() {
-            let row = |k: usize| {
-                let y = by * 4 + k;
-                raw.get(y * w..y * w + used).unwrap_or(&[])
-            };
-            let (r0, r1, r2, r3) = (row(0), row(1), row(2), row(3));
-            let chunks = r0
-                .chunks_exact(8)
-                .zip(r1.chunks_exact(8))
-                .zip(r2.chunks_exact(8).zip(r3.chunks_exact(8)));
-            let mut outs = out.chunks_exact_mut(2);
-            for (o, ((a, b), (c, d))) in (&mut outs).zip(chunks) {
-                let lanes = pairs(a) + pairs(b) + pairs(c) + pairs(d);
-                let sums = (lanes & HALVES) + ((lanes >> 16) & HALVES);
-                let means = (sums + 0x0000_0008_0000_0008) >> 4;
-                o[0] = means as u8;
-                o[1] = (means >> 32) as u8;
-            }
-            // An odd last block.
-            if let Some(last) = outs.into_remainder().first_mut() {
-                let x = used - 4;
-                let mut t = 0u32;
-                for r in [r0, r1, r2, r3] {
-                    if let Some(block) = r.get(x..x + 4) {
-                        t += block.iter().map(|&p| u32::from(p)).sum::<u32>();
-                    }
-                }
-                *last = ((t + 8) >> 4) as u8;
-            }
-        }
-    }
-
-    /// Whether a box [x0, y0, x1, y1] (inclusive, decimated pixels) touches
-    /// the image's outermost rows or columns.
-    pub fn touches_border(&self, bbox: [usize; 4]) -> bool {
-        let [x0, y0, x1, y1] = bbox;
-        x0 == 0 || y0 == 0 || x1 + 1 >= self.width || y1 + 1 >= self.height
-    }
-
-    /// Full-resolution pixel coordinates of a decimated pixel position.
-    pub fn to_full(&self, x: f64, y: f64) -> [f64; 2] {
-        let f = self.factor as f64;
-        [(x + 0.5) * f - 0.5, (y + 0.5) * f - 0.5]
-    }
-}
+pub use decimate::Decimated;
+use ridge::RingStep;
 
 /// A dark connected region of the decimated image, summarised by its moments.
 #[derive(Clone, Debug)]
@@ -239,57 +117,6 @@ pub struct BlobFinder {
     /// The ring test's offsets for each chamfer distance (below
     /// [`RING_CACHE`]), computed when first needed.
     ring_cache: Vec<Option<[RingStep; RING_SAMPLES]>>,
-}
-
-/// One sample of the ring test at a given chamfer distance: the floors of
-/// rho cos and rho sin, and whether either lies so close below an integer
-/// that adding the pixel coordinate in f64 might round up to it (then the
-/// sample is computed in f64, exactly as without the table).
-#[derive(Clone, Copy, Debug, Default)]
-struct RingStep {
-    du: i64,
-    dv: i64,
-    near: bool,
-}
-
-/// Chamfer distances with a cached ring table (larger ones, of huge
-/// regions, are computed each time).
-const RING_CACHE: usize = 2048;
-
-/// The ring test's offsets at chamfer distance `di`.
-fn ring_steps<'a>(
-    cache: &'a mut Vec<Option<[RingStep; RING_SAMPLES]>>,
-    scratch: &'a mut [RingStep; RING_SAMPLES],
-    di: u32,
-) -> &'a [RingStep; RING_SAMPLES] {
-    let compute = |steps: &mut [RingStep; RING_SAMPLES]| {
-        let rho = f64::from(di) / 3.0 * 1.25 + 1.0;
-        for (step, &(sn, cs)) in steps.iter_mut().zip(RING.iter()) {
-            let (tu, tv) = (rho * cs, rho * sn);
-            let (fu, fv) = (tu.floor(), tv.floor());
-            // x + t rounds to at most half an ulp of x + t (far below
-            // 1e-6 for any image size) and never below x + floor(t).
-            let near = |t: f64, f: f64| f + 1.0 - t < 1e-6;
-            *step = RingStep {
-                du: fu as i64,
-                dv: fv as i64,
-                near: near(tu, fu) || near(tv, fv),
-            };
-        }
-    };
-    let index = di as usize;
-    if index >= RING_CACHE {
-        compute(scratch);
-        return scratch;
-    }
-    if cache.len() <= index {
-        cache.resize(index + 1, None);
-    }
-    cache[index].get_or_insert_with(|| {
-        let mut steps = [RingStep::default(); RING_SAMPLES];
-        compute(&mut steps);
-        steps
-    })
 }
 
 /// A run of dark pixels `x0..x1` of row `y`, a node of the union-find.
@@ -576,171 +403,12 @@ impl BlobFinder {
             above = current;
         }
     }
-
-    /// Fills in the blob's deepest point and its best-ringed ridge point
-    /// (`core_*`, `ringed_*`). Chamfer (3-4) distance of each of its pixels
-    /// to the nearest pixel outside it (or the image border), over its box
-    /// and a pixel around it, kept with a ring of zeros so the passes need
-    /// no bounds checks. The nearest outside pixel of a region is always
-    /// one of its light 8-neighbours, so its own box is all it takes.
-    #[inline(never)]
-    pub fn describe_core(&mut self, img: &Decimated, blob: &mut Blob) {
-        let (w, h) = (img.width, img.height);
-        let Some(labels) = self.labels.get(blob.pass) else {
-            return;
-        };
-        if labels.len() != w * h || w == 0 || h == 0 {
-            return;
-        }
-        let label = blob.label;
-        let [bx0, by0, bx1, by1] = blob.bbox;
-        let (rx0, ry0) = (bx0.saturating_sub(1), by0.saturating_sub(1));
-        let (rx1, ry1) = ((bx1 + 1).min(w - 1), (by1 + 1).min(h - 1));
-        let pw = rx1 - rx0 + 3;
-        let ph = ry1 - ry0 + 3;
-        // Padded index of decimated pixel (x, y).
-        let pad = |x: usize, y: usize| (y + 1 - ry0) * pw + (x + 1 - rx0);
-        let d = &mut self.distance;
-        d.clear();
-        d.resize(pw * ph, 0);
-        let inf = u32::MAX / 2;
-        // Only the region's own runs are visited: the rest of its box
-        // stays zero (outside the region), as the passes leave it.
-        let Some(all_runs) = self.runs.get(blob.pass) else {
-            return;
-        };
-        let runs = &mut self.blob_runs;
-        runs.clear();
-        runs.extend(all_runs.iter().filter(|r| r.label == label).map(|r| {
-            let (y, x0, x1) = (r.y as usize, r.x0 as usize, r.x1 as usize);
-            (pad(x0, y), x1 - x0, y, x0)
-        }));
-        for &(start, len, _, _) in runs.iter() {
-            d[start..start + len].fill(inf);
-        }
-        // Forward pass in raster order (runs are in raster order), then
-        // backward.
-        for &(start, len, _, _) in runs.iter() {
-            for i in start..start + len {
-                d[i] = d[i]
-                    .min(d[i - 1] + 3)
-                    .min(d[i - pw] + 3)
-                    .min(d[i - pw - 1] + 4)
-                    .min(d[i - pw + 1] + 4);
-            }
-        }
-        for &(start, len, _, _) in runs.iter().rev() {
-            for i in (start..start + len).rev() {
-                d[i] = d[i]
-                    .min(d[i + 1] + 3)
-                    .min(d[i + pw] + 3)
-                    .min(d[i + pw + 1] + 4)
-                    .min(d[i + pw - 1] + 4);
-            }
-        }
-        // The deepest pixel (the first in raster order on ties).
-        let mut deepest = (0u32, blob.start);
-        for &(start, len, y, x0) in runs.iter() {
-            for k in 0..len {
-                let di = d[start + k];
-                if di > deepest.0 {
-                    deepest = (di, y * w + x0 + k);
-                }
-            }
-        }
-        // Ridge points (a local maximum of the distance across the region in
-        // at least one direction) and the light share of a ring just
-        // outside their inscribed circle. Not on the image's outermost
-        // rows and columns.
-        let mut ringed = (0.0f64, 0u32, 0usize);
-        let mut ring_scratch = [RingStep::default(); RING_SAMPLES];
-        for &(start, len, y, x0) in runs.iter() {
-            if y == 0 || y + 1 >= h {
-                continue;
-            }
-            for k in 0..len {
-                let x = x0 + k;
-                if x == 0 || x + 1 >= w {
-                    continue;
-                }
-                let i = y * w + x;
-                let pi = start + k;
-                let di = d[pi];
-                if di < 6 {
-                    continue;
-                }
-                // Only the thick parts: the disc is among its region's
-                // thickest (thin hose ends are ringed by light too).
-                if 2 * di < deepest.0 {
-                    continue;
-                }
-                let ridge = [(1, pw), (pw, 1), (pw + 1, pw - 1), (pw - 1, pw + 1)]
-                    .iter()
-                    .any(|&(a, b)| {
-                        di >= d[pi - a]
-                            && di >= d[pi + b]
-                            && di >= d[pi + a]
-                            && di >= d[pi - b]
-                            && (di > d[pi - a] || di > d[pi + a])
-                    });
-                if !ridge {
-                    continue;
-                }
-                let rho = f64::from(di) / 3.0 * 1.25 + 1.0;
-                let (mut seen, mut light) = (0usize, 0usize);
-                let steps = ring_steps(&mut self.ring_cache, &mut ring_scratch, di);
-                for (step, &(sn, cs)) in steps.iter().zip(RING.iter()) {
-                    // The sample pixel (floor of x + rho cos, y + rho sin):
-                    // the precomputed integer offsets, but for offsets just
-                    // below an integer, where the sum's rounding may reach
-                    // it: there the float sum, as is.
-                    let (u, v) = if step.near {
-                        let (u, v) = (x as f64 + rho * cs, y as f64 + rho * sn);
-                        (u.floor() as i64, v.floor() as i64)
-                    } else {
-                        (x as i64 + step.du, y as i64 + step.dv)
-                    };
-                    if u < 0 || v < 0 || u >= w as i64 || v >= h as i64 {
-                        continue;
-                    }
-                    seen += 1;
-                    if labels[v as usize * w + u as usize] == 0 {
-                        light += 1;
-                    }
-                }
-                // Outside the image counts as not light: the image border
-                // cuts probes and clouds, and is no evidence of a canopy.
-                if seen * 5 < RING_SAMPLES * 4 {
-                    continue;
-                }
-                let share = light as f64 / RING_SAMPLES as f64;
-                if share > ringed.0 || (share == ringed.0 && di > ringed.1) {
-                    ringed = (share, di, i);
-                }
-            }
-        }
-        let f = img.factor as f64;
-        let (share, dist, i) = ringed;
-        blob.ringed_light = share;
-        blob.ringed_px = img.to_full((i % w) as f64, (i / w) as f64);
-        blob.ringed_radius_px = ((f64::from(dist) / 3.0) - 0.5).max(0.5) * f;
-        let (dist, i) = deepest;
-        blob.core_px = img.to_full((i % w) as f64, (i / w) as f64);
-        // Chamfer units are 3 per pixel; the distance counts to the
-        // centre of the first outside pixel, half a pixel too far.
-        blob.core_radius_px = ((f64::from(dist) / 3.0) - 0.5).max(0.5) * f;
-    }
 }
-
-/// Unit directions (sin, cos) of the ring test around ridge points.
-static RING: std::sync::LazyLock<[(f64, f64); RING_SAMPLES]> = std::sync::LazyLock::new(|| {
-    std::array::from_fn(|k| (std::f64::consts::TAU * k as f64 / RING_SAMPLES as f64).sin_cos())
-});
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use image::Luma;
+    use image::{GrayImage, Luma};
 
     #[test]
     fn finds_a_dark_disc_with_its_size_and_centre() {
@@ -763,36 +431,6 @@ mod tests {
             (b.a_px - r).abs() < 3.0 && (b.b_px - r).abs() < 3.0,
             "{b:?}"
         );
-    }
-
-    #[test]
-    fn core_stays_on_a_disc_with_a_hose_merged_into_it() {
-        // A disc of radius 40 with a long bar (a hose) leaving it to the
-        // right: the centroid moves onto the bar, the core must not.
-        let mut img = GrayImage::from_pixel(640, 320, Luma([180]));
-        let (cx, cy, r) = (160.0, 160.0, 40.0);
-        for (x, y, p) in img.enumerate_pixels_mut() {
-            let (dx, dy) = (x as f64 - cx, y as f64 - cy);
-            if dx * dx + dy * dy <= r * r || (dx > 0.0 && dy.abs() <= 12.0) {
-                *p = Luma([30]);
-            }
-        }
-        let mut dec = Decimated::default();
-        dec.update(&img, 4);
-        let mut finder = BlobFinder::default();
-        let mut blobs = Vec::new();
-        finder.find(&dec, &[0.5], 2, 10.0, &mut blobs);
-        assert_eq!(blobs.len(), 1);
-        let mut b = blobs[0].clone();
-        assert!(b.centre_px[0] > cx + 40.0, "{b:?}");
-        finder.describe_core(&dec, &mut b);
-        let off = (b.core_px[0] - cx).hypot(b.core_px[1] - cy);
-        assert!(off <= 4.0, "core {:?}", b.core_px);
-        // Two decimated pixels: the block size and the chamfer metric.
-        assert!((b.core_radius_px - r).abs() <= 8.0, "{}", b.core_radius_px);
-        // The disc's centre is ringed by light on all sides but the hose's.
-        let off = (b.ringed_px[0] - cx).hypot(b.ringed_px[1] - cy);
-        assert!(off <= 8.0 && b.ringed_light >= 0.75, "{b:?}");
     }
 
     /// The regions by a plain 8-connected pixel flood fill: (first pixel,
@@ -855,13 +493,8 @@ mod tests {
                     (sum / count) as u8
                 })
                 .collect();
-            let img = Decimated {
-                width: w,
-                height: h,
-                factor: 4,
-                pixels,
-                column_sums: Vec::new(),
-            };
+            let mut img = Decimated::default();
+            (img.width, img.height, img.factor, img.pixels) = (w, h, 4, pixels);
             let lo = f64::from(*img.pixels.iter().min().unwrap());
             let mut sorted = img.pixels.clone();
             sorted.sort_unstable();
@@ -923,46 +556,6 @@ mod tests {
                 fresh.describe_core(&dec, x);
                 reused.describe_core(&dec, y);
                 assert_eq!(format!("{x:?}"), format!("{y:?}"), "frame {k}");
-            }
-        }
-    }
-
-    #[test]
-    fn decimation_is_the_rounded_block_mean() {
-        // Widths of an even and an odd number of 4-blocks, and of fewer
-        // than two.
-        for (w, h, factor) in [
-            (67, 45, 1usize),
-            (67, 45, 3),
-            (67, 45, 4),
-            (71, 45, 4),
-            (7, 9, 4),
-            (3, 9, 4),
-            (67, 45, 16),
-        ] {
-            let img = GrayImage::from_fn(w, h, |x, y| Luma([((x * 37 + y * 91) % 256) as u8]));
-            let mut dec = Decimated::default();
-            dec.update(&img, factor);
-            assert_eq!(
-                (dec.width, dec.height),
-                (w as usize / factor, h as usize / factor)
-            );
-            for by in 0..dec.height {
-                for bx in 0..dec.width {
-                    let mut sum = 0u32;
-                    for y in by * factor..(by + 1) * factor {
-                        for x in bx * factor..(bx + 1) * factor {
-                            sum += u32::from(img.get_pixel(x as u32, y as u32)[0]);
-                        }
-                    }
-                    let area = (factor * factor) as f64;
-                    let mean = (f64::from(sum) / area + 0.5).floor() as u8;
-                    assert_eq!(
-                        dec.pixels[by * dec.width + bx],
-                        mean,
-                        "{factor} at {bx},{by}"
-                    );
-                }
             }
         }
     }
