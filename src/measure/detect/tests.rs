@@ -514,10 +514,10 @@ fn a_step_into_saturation_is_glare() {
     };
     let glare = ramp(255.0);
     let e = super::rim::strongest_rise(&glare, 0.0, 0.5, 12.0).expect("a step");
-    assert!(super::glare_on_light_side(&glare, 0.0, 0.5, &e));
+    assert!(super::verify::glare_on_light_side(&glare, 0.0, 0.5, &e));
     let canopy = ramp(180.0);
     let e = super::rim::strongest_rise(&canopy, 0.0, 0.5, 12.0).expect("a step");
-    assert!(!super::glare_on_light_side(&canopy, 0.0, 0.5, &e));
+    assert!(!super::verify::glare_on_light_side(&canopy, 0.0, 0.5, &e));
 }
 
 /// The angle between two directions, as `rem_euclid` gives it.

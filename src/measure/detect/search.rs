@@ -1,0 +1,338 @@
+//! The full-frame search: the candidates of both sources (dark regions
+//! and edge voting), their seeds, the budget and order in which they are
+//! verified, and the inner disc preferred to the canopy's rim.
+
+use super::coarse::Blob;
+use super::{Detector, Verified};
+use image::GrayImage;
+
+/// Wide-pass reach of seeds whose radius is not a rim's (the deepest
+/// point's inscribed circle, the point ringed by light, an edge-voting
+/// peak, whose radius comes from whatever edges voted for it), in their
+/// radii.
+const UNSURE_SEED_REACH: f64 = 5.0;
+
+/// An inner disc (see [`Detector::prefer_inner_disc`]) is within this share
+/// of `r / R` of its outer ellipse's size, its centre within this many of
+/// its radii of the outer's, and its rim step at least this share of the
+/// outer's.
+const INNER_SIZE_TOLERANCE: f64 = 0.25;
+const INNER_OFFSET_RADII: f64 = 0.3;
+const INNER_CONTRAST_SHARE: f64 = 0.5;
+/// The inner disc's rays reach this share of the outer ellipse's radius.
+const INNER_REACH_OUTER_RADII: f64 = 0.8;
+
+/// Random stream of an inner-disc seed, apart from its outer seed's.
+const INNER_SEED_STREAM: u64 = 0x1_0000;
+
+/// Circles of the edge source verified per frame, strongest first.
+const EDGE_SEEDS: usize = 4;
+
+/// Where and how large a coarse candidate is, full-res distorted pixels.
+#[derive(Clone, Debug)]
+pub(super) struct Seed {
+    pub(super) centre_px: [f64; 2],
+    pub(super) a_px: f64,
+    pub(super) b_px: f64,
+    pub(super) theta: f64,
+    /// How far the first ray pass looks, in multiples of the seed's radius.
+    pub(super) reach: f64,
+    /// Which point of its blob: 0 the centroid, 1 the deepest point, 2 the
+    /// point best ringed by light; 3 a circle of the edge source; 4 the
+    /// disc looked for inside a verified ellipse (see
+    /// [`Detector::prefer_inner_disc`]).
+    pub(super) kind: u8,
+}
+
+impl Seed {
+    /// Nearly the same seed: centres within a tenth of the smaller radius,
+    /// axes within 10 %, the same reach, and (unless both are near-circles)
+    /// the same orientation within 0.1 rad.
+    fn same_as(&self, other: &Seed) -> bool {
+        let close = |x: f64, y: f64| (x / y - 1.0).abs() <= 0.1;
+        let r = self.b_px.min(other.b_px);
+        let d =
+            (self.centre_px[0] - other.centre_px[0]).hypot(self.centre_px[1] - other.centre_px[1]);
+        let round = |s: &Seed| s.a_px <= 1.1 * s.b_px;
+        let dtheta = (self.theta - other.theta).rem_euclid(std::f64::consts::PI);
+        let aligned = dtheta.min(std::f64::consts::PI - dtheta) <= 0.1;
+        self.reach == other.reach
+            && d <= 0.1 * r
+            && close(self.a_px, other.a_px)
+            && close(self.b_px, other.b_px)
+            && ((round(self) && round(other)) || aligned)
+    }
+}
+
+impl Detector {
+    /// The candidates of both sources, verified on the sparse rim, in the
+    /// order tried; the search ends at the first that scores `accept`.
+    pub(super) fn verify_candidates(&mut self, image: &GrayImage, accept: f64) -> Vec<Verified> {
+        self.decimated
+            .update(image, self.cfg.decimation.clamp(1, 16) as usize);
+        let f = self.decimated.factor as f64;
+        // Smallest disc: a third of its area must make dark blocks.
+        let min_area = ((std::f64::consts::PI * (self.min_radius_px / f).powi(2)) / 3.0)
+            .floor()
+            .max(2.0) as usize;
+        let mut blobs = std::mem::take(&mut self.blobs);
+        self.finder.find(
+            &self.decimated,
+            &self.cfg.threshold_fractions,
+            min_area,
+            self.cfg.min_contrast_gray,
+            &mut blobs,
+        );
+        blobs.retain(|b| b.a_px >= 0.5 * self.min_radius_px && b.b_px >= 0.5);
+        // The budget of candidates counts distinct dark regions (at the
+        // highest threshold; the lower thresholds' regions are their parts),
+        // larger first: small ones are mostly noise and thin shapes. A large
+        // region broken into many parts (a shaded probe) must not use up the
+        // budget before a small disc elsewhere in the frame is tried.
+        // Within a region, its largest part at each threshold is tried.
+        blobs.sort_by(|x, y| {
+            y.region_area
+                .cmp(&x.region_area)
+                .then(x.region.cmp(&y.region))
+                .then(y.area.cmp(&x.area))
+        });
+        // The budget: the regions, and within each its largest part at
+        // each threshold.
+        let mut selected: Vec<usize> = Vec::new();
+        let mut regions = 0usize;
+        for i in 0..blobs.len() {
+            let b = &blobs[i];
+            let new_region = i == 0 || blobs[i - 1].region != b.region;
+            if new_region {
+                if regions >= self.cfg.max_candidates as usize {
+                    break;
+                }
+                regions += 1;
+            }
+            let same_region = |k: &usize| blobs[*k].region == b.region;
+            if selected
+                .iter()
+                .rev()
+                .take_while(|k| same_region(k))
+                .any(|&k| blobs[k].level == b.level)
+            {
+                continue;
+            }
+            selected.push(i);
+        }
+        // Verified in order of how disc-like their moments are (whole and
+        // round first, the rest as they were), so that a clear view of the
+        // drogue ends the search before the probe and hose are looked at.
+        // The stable sort keeps the size order within each group.
+        let round: Vec<bool> = selected
+            .iter()
+            .map(|&i| blobs[i].whole_and_round(&self.decimated, self.cfg.min_axis_ratio))
+            .collect();
+        let mut order: Vec<usize> = (0..selected.len()).collect();
+        order.sort_by_key(|&k| !round[k]);
+        let mut kept: Vec<Blob> = Vec::new();
+        let mut verified: Vec<Verified> = Vec::new();
+        let mut tried: Vec<Seed> = Vec::new();
+        'blobs: for &k in &order {
+            let index = selected[k];
+            // The deepest and best-ringed points cost a distance transform
+            // of the region: only for the blobs that get this far.
+            self.finder
+                .describe_core(&self.decimated, &mut blobs[index]);
+            let b = &blobs[index];
+            // Drop near-duplicates (the same region at several thresholds).
+            let dup = kept.iter().any(|k| {
+                let near = |p: [f64; 2], q: [f64; 2], r: f64| (p[0] - q[0]).hypot(p[1] - q[1]) < r;
+                let r = 0.25 * k.b_px.min(b.b_px);
+                near(k.centre_px, b.centre_px, r)
+                    && near(k.core_px, b.core_px, r)
+                    && near(k.ringed_px, b.ringed_px, r)
+                    && (k.a_px / b.a_px - 1.0).abs() < 0.25
+            });
+            if dup {
+                continue;
+            }
+            kept.push(b.clone());
+            // Two seeds: the centroid with the moment ellipse, and the
+            // deepest point with its inscribed circle (on the disc even when
+            // a hose or probe has merged with it).
+            let mut seeds = vec![Seed {
+                centre_px: b.centre_px,
+                a_px: b.a_px,
+                b_px: b.b_px,
+                theta: b.theta,
+                reach: 1.8,
+                kind: 0,
+            }];
+            let off = (b.core_px[0] - b.centre_px[0]).hypot(b.core_px[1] - b.centre_px[1]);
+            if off > 0.3 * b.core_radius_px {
+                seeds.push(Seed {
+                    centre_px: b.core_px,
+                    a_px: b.core_radius_px,
+                    b_px: b.core_radius_px,
+                    theta: 0.0,
+                    reach: UNSURE_SEED_REACH,
+                    kind: 1,
+                });
+            }
+            let off = (b.ringed_px[0] - b.centre_px[0]).hypot(b.ringed_px[1] - b.centre_px[1]);
+            let off_core = (b.ringed_px[0] - b.core_px[0]).hypot(b.ringed_px[1] - b.core_px[1]);
+            if b.ringed_light >= 0.5
+                && off > 0.3 * b.ringed_radius_px
+                && off_core > 0.3 * b.ringed_radius_px
+            {
+                seeds.push(Seed {
+                    centre_px: b.ringed_px,
+                    a_px: b.ringed_radius_px,
+                    b_px: b.ringed_radius_px,
+                    theta: 0.0,
+                    reach: UNSURE_SEED_REACH,
+                    kind: 2,
+                });
+            }
+            // A region that is cut by the border or elongated is mostly not
+            // a disc: its centroid lies off any disc in it, the point ringed
+            // by light is the likeliest disc centre, then the deepest point.
+            if !round[k] {
+                seeds.reverse();
+            }
+            for seed in &seeds {
+                // The same region at another threshold often gives nearly
+                // the same seed: its rays would find the same edges.
+                if tried.iter().any(|t| t.same_as(seed)) {
+                    continue;
+                }
+                tried.push(seed.clone());
+                // The seed's random stream is fixed by its blob's place in
+                // the size order and its kind, not by the order of trying.
+                if self.try_seed(
+                    image,
+                    seed,
+                    3 * k as u64 + seed.kind as u64,
+                    accept,
+                    &mut verified,
+                ) {
+                    break 'blobs;
+                }
+            }
+        }
+        // The edge source, when the dark regions gave no clear drogue: a
+        // disc merged with the hose, probe or a glare streak, or washed out
+        // by haze, still has its rim.
+        if !verified.iter().any(|v| v.score >= accept) {
+            let circles = self.voter.find(
+                &self.decimated,
+                self.cfg.min_contrast_gray,
+                self.min_radius_px,
+                self.max_radius_px,
+                EDGE_SEEDS,
+            );
+            for (i, c) in circles.iter().enumerate() {
+                let seed = Seed {
+                    centre_px: c.centre_px,
+                    a_px: c.radius_px,
+                    b_px: c.radius_px,
+                    theta: 0.0,
+                    reach: UNSURE_SEED_REACH,
+                    kind: 3,
+                };
+                if tried.iter().any(|t| t.same_as(&seed)) {
+                    continue;
+                }
+                tried.push(seed.clone());
+                tracing::debug!(strength = c.strength, "edge source circle");
+                if self.try_seed(image, &seed, 1000 + i as u64, accept, &mut verified) {
+                    break;
+                }
+            }
+        }
+        tracing::debug!(
+            regions = regions,
+            seeds = tried.len(),
+            verified = verified.len(),
+            best = ?verified.iter().map(|v| v.score).max_by(f64::total_cmp),
+            "full-frame search"
+        );
+        self.blobs = blobs;
+        verified
+    }
+
+    /// Verifies a seed (its random stream `index`), keeps it in `verified`
+    /// when it passes, and says whether it ends the search (scores
+    /// `accept`).
+    fn try_seed(
+        &mut self,
+        image: &GrayImage,
+        seed: &Seed,
+        index: u64,
+        accept: f64,
+        verified: &mut Vec<Verified>,
+    ) -> bool {
+        let r = self.verify_seed(image, seed, index);
+        tracing::debug!(
+            centre_px = ?[seed.centre_px[0].round(), seed.centre_px[1].round()],
+            radius_px = seed.a_px.round(),
+            kind = seed.kind,
+            result = ?r.as_ref().map(|v| v.score),
+            "candidate"
+        );
+        let r = r.map(|v| self.prefer_inner_disc(image, v, index));
+        let Ok(v) = r else {
+            return false;
+        };
+        let ends = v.score >= accept;
+        verified.push(v);
+        ends
+    }
+
+    /// The canopy's outer rim taken for the disc (under haze its step to
+    /// the sky can be the strongest on every ray) has the disc inside it,
+    /// concentric, at `r / R` of its size. When that inner ellipse verifies
+    /// as a rim of its own, with a step of comparable contrast, it is the
+    /// disc. Inside a true disc there is no such rim: the shading of its
+    /// inside gives steps far weaker than its rim's.
+    pub(super) fn prefer_inner_disc(
+        &mut self,
+        image: &GrayImage,
+        outer: Verified,
+        index: u64,
+    ) -> Verified {
+        let ratio = self.drogue.inner_radius_m / self.drogue.canopy_radius_m;
+        if !(ratio.is_finite() && ratio > 0.0 && ratio < 1.0) {
+            return outer;
+        }
+        let e = outer.ellipse;
+        // The inner rim is looked for from the centre out to well inside
+        // the outer one: there the disc's step is the strongest rise.
+        let seed = Seed {
+            centre_px: self.camera.distort_px([e.cx, e.cy]),
+            a_px: e.a * ratio,
+            b_px: e.b * ratio,
+            theta: e.theta,
+            // The wide pass reaches `reach * r + 4` px (r the seed's radius).
+            reach: ((INNER_REACH_OUTER_RADII * e.b - 4.0) / (ratio * e.b)).max(1.0),
+            kind: 4,
+        };
+        let inner = match self.verify_seed(image, &seed, index ^ INNER_SEED_STREAM) {
+            Ok(inner) => inner,
+            Err(why) => {
+                tracing::debug!(outer_axes_px = ?[e.a.round(), e.b.round()], ?why, "no inner disc");
+                return outer;
+            }
+        };
+        let size = inner.ellipse.a / e.a;
+        let offset = (inner.ellipse.cx - e.cx).hypot(inner.ellipse.cy - e.cy);
+        let nested = (size - ratio).abs() <= INNER_SIZE_TOLERANCE * ratio
+            && offset <= INNER_OFFSET_RADII * inner.ellipse.a;
+        let strong = inner.rim_contrast >= INNER_CONTRAST_SHARE * outer.rim_contrast;
+        tracing::debug!(
+            outer_axes_px = ?[e.a.round(), e.b.round()],
+            inner_axes_px = ?[inner.ellipse.a.round(), inner.ellipse.b.round()],
+            nested,
+            inner_contrast = inner.rim_contrast,
+            outer_contrast = outer.rim_contrast,
+            "inner disc"
+        );
+        if nested && strong { inner } else { outer }
+    }
+}

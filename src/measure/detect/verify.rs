@@ -1,0 +1,359 @@
+//! Verification of a seed: the wide ray pass from its centre, a robust
+//! fit, and the narrow pass around it (repeated until it settles), with the
+//! checks of the rim itself (size, shape, contrast, one dark inside).
+
+use super::search::Seed;
+use super::{
+    Detector, Reject, SATURATED_GRAY, Verified, conic_fit, median, polar_radius,
+    polar_radius_local, ray_directions, rim,
+};
+use crate::measure::ellipse::Ellipse;
+use image::GrayImage;
+use std::f64::consts::TAU;
+
+/// Rim ray spacing while candidates are compared, in multiples of the
+/// configured spacing.
+const SCOUT_SPACING_FACTOR: f64 = 3.0;
+
+/// Narrow-pass windows are widened by this factor while more than
+/// [`CLIPPED_SHARE`] of the steps run into their ends (blur), up to
+/// [`MAX_WIDEN`] times, and at most to [`MAX_WIDE_MARGIN_RADII`] of the
+/// radius and [`MAX_WIDE_MARGIN_PX`] pixels each way (32 px of motion blur
+/// is a 32 px ramp).
+const WIDEN_STEP: f64 = 2.5;
+const MAX_WIDEN: f64 = 6.25;
+pub(super) const CLIPPED_SHARE: f64 = 0.25;
+const MAX_WIDE_MARGIN_RADII: f64 = 0.6;
+const MAX_WIDE_MARGIN_PX: f64 = 48.0;
+
+/// Edges within this many of their robust scatter (and at least
+/// `inlier_tolerance_px`) of the ellipse are on the rim.
+const NOISE_TOLERANCE_SIGMAS: f64 = 3.0;
+
+/// Samples per seed radius on the rays of a seed's wide first pass.
+const WIDE_STEPS_PER_RADIUS: f64 = 40.0;
+
+/// One narrow rim pass around an ellipse, before its canopy evidence.
+pub(super) struct RimPass {
+    pub(super) ellipse: Ellipse,
+    /// The rays' origin, distorted pixels.
+    pub(super) centre: [f64; 2],
+    pub(super) points_px: Vec<[f64; 2]>,
+    /// The same points, undistorted.
+    pub(super) undistorted: Vec<[f64; 2]>,
+    pub(super) residuals: Vec<f64>,
+    pub(super) inliers: Vec<usize>,
+    /// Width of each point's step (twice its edge-to-light distance),
+    /// pixels: wide along a motion blur.
+    pub(super) step_widths_px: Vec<f64>,
+    /// Share of the edges whose step still runs into its window's ends
+    /// after the widest window: a blur longer than can be measured.
+    pub(super) clipped_share: f64,
+    pub(super) rim_contrast: f64,
+    /// Share of the rays in the image with their edge on the ellipse.
+    pub(super) shape: f64,
+    /// Share of the inside darker than the rim's mid level.
+    pub(super) fill: f64,
+    /// Distance from the ellipse counted as on the rim, pixels.
+    pub(super) tolerance: f64,
+    /// The rim's mid level by direction (angle about the ellipse's centre,
+    /// gray level), for the canopy test.
+    pub(super) mids: Vec<(f64, f32)>,
+}
+
+/// Whether the light side of step `e` (from its crossing to a few samples
+/// past its light end) on profile `p` (sampled from `s_min` every `step`)
+/// reaches saturation.
+pub(super) fn glare_on_light_side(p: &[f32], s_min: f64, step: f64, e: &rim::RayEdge) -> bool {
+    let Some(last) = p.len().checked_sub(1) else {
+        return false;
+    };
+    let index = |s: f64| (((s - s_min) / step).max(0.0) as usize).min(last);
+    let (from, to) = (index(e.s), (index(e.light_s) + 2).min(last));
+    p[from..=to].iter().any(|&v| v >= SATURATED_GRAY)
+}
+
+impl Detector {
+    /// Verifies a coarse seed: a wide ray pass from its centre, a robust
+    /// fit, then the narrow pass around that fit.
+    #[inline(never)]
+    pub(super) fn verify_seed(
+        &mut self,
+        image: &GrayImage,
+        seed: &Seed,
+        index: u64,
+    ) -> Result<Verified, Reject> {
+        let rays = 48;
+        let mut points = Vec::with_capacity(rays);
+        let c = seed.centre_px;
+        // An elongated region (disc plus hose or probe) is not searched
+        // along its length: the disc is across it.
+        let longest = 2.0 * seed.b_px;
+        for k in 0..rays {
+            let phi = TAU * k as f64 / rays as f64;
+            let r = polar_radius(seed.a_px, seed.b_px, seed.theta, phi).min(longest);
+            let dir = [phi.cos(), phi.sin()];
+            let s_max = seed.reach * r + 4.0;
+            // About a pixel of accuracy on a small seed, a few percent of
+            // its size on a large one, is enough here (the narrow passes,
+            // 10 % of the radius wide, refine it): a fixed number of steps
+            // per radius, so that a large dark region (cloud, shadow) costs
+            // no more than a disc.
+            let step = (r / WIDE_STEPS_PER_RADIUS).max(0.5);
+            rim::profile(image, c, dir, 1.0, s_max, step, &mut self.profile);
+            if let Some(e) =
+                rim::strongest_rise(&self.profile, 1.0, step, self.cfg.min_contrast_gray as f32)
+            {
+                let p = [c[0] + e.s * dir[0], c[1] + e.s * dir[1]];
+                points.push(self.camera.undistort_px(p));
+            }
+        }
+        if points.len() < 8 {
+            return Err(Reject::FewEdges(points.len()));
+        }
+        let scale = seed.b_px.max(1.0);
+        let tolerance = (0.03 * scale).max(1.0);
+        // Most rays on the rim: a trimmed least-squares fit will do; else
+        // RANSAC (a hose or probe merged with the disc).
+        let first = conic_fit::fit_ellipse(&points)
+            .and_then(|e| conic_fit::refine(&e, &points, 3.0 * tolerance, 1))
+            .and_then(|e| conic_fit::refine(&e, &points, tolerance, 2))
+            .filter(|e| {
+                let c = e.to_conic();
+                let n = points
+                    .iter()
+                    .filter(|p| c.sampson_distance(p[0], p[1]) <= tolerance)
+                    .count();
+                n as f64 >= 0.8 * points.len() as f64
+            })
+            .or_else(|| conic_fit::ransac_ellipse(&points, tolerance, 300, self.cfg.seed ^ index))
+            .ok_or(Reject::NoEllipse)?;
+        if !self.plausible(&first, 0.5) {
+            return Err(Reject::Implausible);
+        }
+        // Candidates are compared on a sparser rim (cheaper); the winner
+        // gets the full density.
+        self.verify_settled(
+            image,
+            &first,
+            SCOUT_SPACING_FACTOR * self.cfg.rim_point_spacing_px,
+            self.cfg.max_rim_points,
+        )
+    }
+
+    /// Size and shape plausible for the disc (`slack` widens the limits).
+    pub(super) fn plausible(&self, e: &Ellipse, slack: f64) -> bool {
+        e.a.is_finite()
+            && e.b > 0.0
+            && e.a <= 2.0 * self.max_radius_px / slack
+            && e.a >= slack * 0.8 * self.min_radius_px
+            && e.b / e.a >= self.cfg.min_axis_ratio * slack
+    }
+
+    /// Narrow ray pass around an ellipse (undistorted pixels), robust refit,
+    /// and the evidence score: [`Self::rim_pass`], repeated from its own result while that moves
+    /// by more than half a pixel (the narrow search is centred on the start
+    /// ellipse: a start a few pixels off gives edges near the window's ends).
+    pub(super) fn verify_settled(
+        &mut self,
+        image: &GrayImage,
+        start: &Ellipse,
+        spacing_px: f64,
+        max_points: u32,
+    ) -> Result<Verified, Reject> {
+        // The canopy evidence (a second ray pass) is looked at only on the
+        // pass that is kept: a pass that moves the ellipse is followed by
+        // another one.
+        let mut previous = *start;
+        for round in 0..3 {
+            let pass = self.rim_pass(image, &previous, spacing_px, max_points)?;
+            if round == 2 || pass.ellipse.max_param_error_px(&previous) <= 0.5 {
+                return self.score(image, pass);
+            }
+            previous = pass.ellipse;
+        }
+        Err(Reject::Unsettled)
+    }
+
+    /// The narrow ray pass around `start` and the robust refit, with the
+    /// checks of the rim itself (size, shape, contrast, one dark inside).
+    fn rim_pass(
+        &mut self,
+        image: &GrayImage,
+        start: &Ellipse,
+        spacing_px: f64,
+        max_points: u32,
+    ) -> Result<RimPass, Reject> {
+        let centre = self.camera.distort_px([start.cx, start.cy]);
+        let perimeter = TAU * ((start.a * start.a + start.b * start.b) / 2.0).sqrt();
+        let rays =
+            ((perimeter / spacing_px.max(0.1)) as usize).clamp(24, max_points.max(24) as usize);
+        let min_contrast = self.cfg.min_contrast_gray as f32;
+        let (w, h) = (f64::from(image.width()), f64::from(image.height()));
+        let inside = |p: [f64; 2]| p[0] >= 0.0 && p[1] >= 0.0 && p[0] <= w - 1.0 && p[1] <= h - 1.0;
+
+        // A blurred rim is a ramp as wide as the blur: where most steps run
+        // into the window's ends, their levels are not the disc's and the
+        // canopy's, and the window is widened (the mid-level crossing of a
+        // whole blurred step is the edge).
+        let mut widen = 1.0;
+        let (mut points_px, mut undistorted, mut contrasts, mut mid_levels, mut widths);
+        let mut rays_in_image;
+        let mut clipped_share;
+        loop {
+            points_px = Vec::with_capacity(rays);
+            undistorted = Vec::with_capacity(rays);
+            contrasts = Vec::with_capacity(rays);
+            mid_levels = Vec::with_capacity(rays);
+            widths = Vec::with_capacity(rays);
+            rays_in_image = 0usize;
+            let mut clipped = 0usize;
+            let (sin_theta, cos_theta) = start.theta.sin_cos();
+            for dir in ray_directions(rays) {
+                // The ray's angle to the major axis: phi - theta.
+                let (cos_local, sin_local) = (
+                    dir[0] * cos_theta + dir[1] * sin_theta,
+                    dir[1] * cos_theta - dir[0] * sin_theta,
+                );
+                let r = polar_radius_local(start.a, start.b, cos_local, sin_local);
+                let base = (self.cfg.rim_search_fraction * r)
+                    .clamp(4.0, self.cfg.rim_search_max_px.max(4.0));
+                let margin = if widen > 1.0 {
+                    (base * widen)
+                        .min(MAX_WIDE_MARGIN_RADII * r)
+                        .min(MAX_WIDE_MARGIN_PX)
+                        .max(base)
+                } else {
+                    base
+                };
+                let (s0, s1) = ((r - margin).max(0.5), r + margin);
+                let far = [centre[0] + s1 * dir[0], centre[1] + s1 * dir[1]];
+                let near = [centre[0] + s0 * dir[0], centre[1] + s0 * dir[1]];
+                if !(inside(far) && inside(near)) {
+                    continue;
+                }
+                rays_in_image += 1;
+                rim::profile(image, centre, dir, s0, s1, 0.5, &mut self.profile);
+                // In noise, the step is located on the smoothed profile: its
+                // ends and levels are then the step's, not the noise's.
+                let half = self.smooth_half.min((0.1 * r) as usize);
+                if half > 0 {
+                    self.raw_profile.clone_from(&self.profile);
+                    rim::smooth(&mut self.profile, half, &mut self.scratch);
+                }
+                if let Some(mut e) = rim::strongest_rise(&self.profile, s0, 0.5, min_contrast) {
+                    // A step into saturated pixels is most likely the skirt
+                    // of a glare streak lying over the disc: its width says
+                    // nothing of blur. (Its point stays: the robust fit
+                    // drops it when it is off the rim.)
+                    let raw = if half > 0 {
+                        &self.raw_profile
+                    } else {
+                        &self.profile
+                    };
+                    let glare = glare_on_light_side(raw, s0, 0.5, &e);
+                    if half > 0 {
+                        let mid = 0.5 * (e.dark + e.light);
+                        let reach = 0.5 * self.smoothing_spread_px[half] + 1.0;
+                        if let Some(s) =
+                            rim::crossing_near(&self.raw_profile, s0, 0.5, mid, e.s, reach)
+                        {
+                            e.s = s;
+                        }
+                    }
+                    let p = [centre[0] + e.s * dir[0], centre[1] + e.s * dir[1]];
+                    points_px.push(p);
+                    undistorted.push(self.camera.undistort_px(p));
+                    contrasts.push(f64::from(e.light - e.dark));
+                    mid_levels.push(0.5 * (e.dark + e.light));
+                    // The smoothing's own spread is not the step's.
+                    let spread = self.smoothing_spread_px[half];
+                    widths.push((2.0 * (e.light_s - e.s) - spread).max(0.0));
+                    clipped += usize::from(e.clipped && !glare);
+                }
+            }
+            tracing::trace!(
+                rays,
+                rays_in_image,
+                edges = points_px.len(),
+                clipped,
+                widen,
+                "rim pass"
+            );
+            clipped_share = clipped as f64 / points_px.len().max(1) as f64;
+            if widen >= MAX_WIDEN || clipped_share <= CLIPPED_SHARE {
+                break;
+            }
+            widen *= WIDEN_STEP;
+        }
+        if rays_in_image < rays / 4 {
+            return Err(Reject::OutOfImage);
+        }
+        if undistorted.len() < self.cfg.min_rim_points as usize {
+            return Err(Reject::FewEdges(undistorted.len()));
+        }
+        let min_tol = self.cfg.inlier_tolerance_px.max(0.1);
+        let coarse_tol = (0.05 * start.b).max(3.0 * min_tol);
+        let coarse =
+            conic_fit::refine(start, &undistorted, coarse_tol, 2).ok_or(Reject::NoEllipse)?;
+        // The edges' own scatter sets what is "on the rim": a blurred rim in
+        // noise is located to a pixel or two (noise over the ramp's slope),
+        // a sharp one to a tenth.
+        let mut residuals = Vec::new();
+        conic_fit::residuals(&coarse, &undistorted, &mut residuals);
+        let mut near: Vec<f64> = residuals
+            .iter()
+            .copied()
+            .filter(|r| *r <= coarse_tol)
+            .collect();
+        let sigma = 1.4826 * median(&mut near);
+        let tol = (NOISE_TOLERANCE_SIGMAS * sigma).clamp(min_tol, (0.5 * coarse_tol).max(min_tol));
+        let ellipse = conic_fit::refine(&coarse, &undistorted, tol, 2).ok_or(Reject::NoEllipse)?;
+        if !self.plausible(&ellipse, 1.0) {
+            return Err(Reject::Implausible);
+        }
+        conic_fit::residuals(&ellipse, &undistorted, &mut residuals);
+        let inliers: Vec<usize> = (0..residuals.len())
+            .filter(|&i| residuals[i] <= tol)
+            .collect();
+        if inliers.len() < self.cfg.min_rim_points as usize {
+            return Err(Reject::FewInliers(inliers.len()));
+        }
+        let mut inlier_contrast: Vec<f64> = inliers.iter().map(|&i| contrasts[i]).collect();
+        let rim_contrast = median(&mut inlier_contrast);
+        if rim_contrast < self.cfg.min_contrast_gray {
+            return Err(Reject::LowContrast(rim_contrast));
+        }
+        // Dark inside: the disc fills its ellipse. A crescent (whose outer
+        // arc is a fine circle), a ring, or the canopy's outer rim taken for
+        // the disc's have light inside the ellipse their edges fit.
+        let mids: Vec<(f64, f32)> = inliers
+            .iter()
+            .map(|&i| {
+                let p = undistorted[i];
+                let angle = (p[1] - ellipse.cy).atan2(p[0] - ellipse.cx);
+                (angle, mid_levels[i])
+            })
+            .collect();
+        let fill = self.fill_share(image, &ellipse, &mids);
+        if fill < self.cfg.min_fill {
+            return Err(Reject::LightInside(fill));
+        }
+        let shape = inliers.len() as f64 / rays_in_image as f64;
+        Ok(RimPass {
+            ellipse,
+            centre,
+            points_px,
+            undistorted,
+            residuals,
+            inliers,
+            step_widths_px: widths,
+            clipped_share,
+            rim_contrast,
+            shape,
+            fill,
+            tolerance: tol,
+            mids,
+        })
+    }
+}
