@@ -178,6 +178,8 @@ enum Reject {
     Soft(f64),
     /// The narrow passes did not settle.
     Unsettled,
+    /// The seed's first fit is the rim of a candidate already verified.
+    Known,
 }
 
 /// Finds the dark inner circle. Holds scratch buffers between frames.

@@ -268,7 +268,7 @@ impl Detector {
         accept: f64,
         verified: &mut Vec<Verified>,
     ) -> bool {
-        let r = self.verify_seed(image, seed, index);
+        let r = self.verify_seed(image, seed, index, verified);
         tracing::debug!(
             centre_px = ?[seed.centre_px[0].round(), seed.centre_px[1].round()],
             radius_px = seed.a_px.round(),
@@ -313,7 +313,7 @@ impl Detector {
             reach: ((INNER_REACH_OUTER_RADII * e.b - 4.0) / (ratio * e.b)).max(1.0),
             kind: 4,
         };
-        let inner = match self.verify_seed(image, &seed, index ^ INNER_SEED_STREAM) {
+        let inner = match self.verify_seed(image, &seed, index ^ INNER_SEED_STREAM, &[]) {
             Ok(inner) => inner,
             Err(why) => {
                 tracing::debug!(outer_axes_px = ?[e.a.round(), e.b.round()], ?why, "no inner disc");

@@ -30,6 +30,10 @@ const MAX_WIDE_MARGIN_PX: f64 = 48.0;
 /// `inlier_tolerance_px`) of the ellipse are on the rim.
 const NOISE_TOLERANCE_SIGMAS: f64 = 3.0;
 
+/// Relative difference of centre and axes within which two ellipses are
+/// one rim ([`same_rim`]).
+const SAME_RIM: f64 = 0.05;
+
 /// Samples per seed radius on the rays of a seed's wide first pass.
 const WIDE_STEPS_PER_RADIUS: f64 = 40.0;
 
@@ -73,15 +77,27 @@ pub(super) fn glare_on_light_side(p: &[f32], s_min: f64, step: f64, e: &rim::Ray
     p[from..=to].iter().any(|&v| v >= SATURATED_GRAY)
 }
 
+/// Whether `b` is the rim `a` to within [`SAME_RIM`] of its size (centre
+/// and axes): a narrow pass around either meets the same edges (its window
+/// is [`DetectConfig::rim_search_fraction`](super::DetectConfig) of the
+/// radius, 10 % by default), so both settle on the same ellipse.
+fn same_rim(a: &Ellipse, b: &Ellipse) -> bool {
+    let close = |x: f64, y: f64| (x / y - 1.0).abs() <= SAME_RIM;
+    (a.cx - b.cx).hypot(a.cy - b.cy) <= SAME_RIM * a.b && close(a.a, b.a) && close(a.b, b.b)
+}
+
 impl Detector {
     /// Verifies a coarse seed: a wide ray pass from its centre, a robust
-    /// fit, then the narrow pass around that fit.
+    /// fit, then the narrow pass around that fit. A seed whose fit is the
+    /// rim of a candidate in `known` stops there ([`Reject::Known`]): the
+    /// narrow passes would settle on that candidate again.
     #[inline(never)]
     pub(super) fn verify_seed(
         &mut self,
         image: &GrayImage,
         seed: &Seed,
         index: u64,
+        known: &[Verified],
     ) -> Result<Verified, Reject> {
         let rays = 48;
         let mut points = Vec::with_capacity(rays);
@@ -130,6 +146,9 @@ impl Detector {
             .ok_or(Reject::NoEllipse)?;
         if !self.plausible(&first, 0.5) {
             return Err(Reject::Implausible);
+        }
+        if known.iter().any(|v| same_rim(&v.ellipse, &first)) {
+            return Err(Reject::Known);
         }
         // Candidates are compared on a sparser rim (cheaper); the winner
         // gets the full density.
