@@ -5,6 +5,8 @@
 //! the simulator's truth, never against the code under test.
 #![allow(dead_code)]
 
+pub mod scores;
+
 use drogue_sim::camera::SimCamera;
 use drogue_sim::sweep::{DrogueTruth, Level, Sweep};
 use drogue_vision::config::Config;
