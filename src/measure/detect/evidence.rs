@@ -95,7 +95,7 @@ impl Detector {
             mids,
         } = pass;
         // Canopy evidence: its outer rim where the candidate's pose puts it.
-        let widths: Vec<(f64, f64)> = inliers
+        let mut widths: Vec<(f64, f64)> = inliers
             .iter()
             .map(|&i| {
                 let [u, v] = points_px[i];
@@ -103,6 +103,10 @@ impl Detector {
                 (angle, step_widths_px[i])
             })
             .collect();
+        // The canopy test looks both up by angle.
+        widths.sort_by(|a, b| a.0.total_cmp(&b.0));
+        let mut mids = mids;
+        mids.sort_by(|a, b| a.0.total_cmp(&b.0));
         // A blur is measured while the widest window holds its steps (the
         // mid-level crossing of a whole blurred step is the edge); beyond
         // that the levels are not the disc's and the canopy's.
