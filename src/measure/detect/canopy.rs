@@ -89,10 +89,11 @@ pub struct RimEdge<'a> {
     /// is smeared out and not judged.
     pub widths: &'a [(f64, f64)],
     /// The disc's rim mid level by direction: (image angle about the
-    /// ellipse's centre, radians; gray level), sorted by angle. The polarity-free test
-    /// (`outer_edge_offset`) counts a ray only where the canopy between
-    /// the disc and the predicted rim is lighter than this: a dark shape
-    /// next to the candidate (a blob's other arm, the probe) is not canopy.
+    /// ellipse's centre, radians; gray level), sorted by angle. The
+    /// polarity-free test (`outer_edge_offset`) counts a ray only where the
+    /// canopy between the disc and the predicted rim is lighter than this:
+    /// a dark shape next to the candidate (a blob's other arm, the probe) is
+    /// not canopy.
     pub mids: &'a [(f64, f32)],
 }
 
@@ -363,6 +364,29 @@ fn outer_edge_offset(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn nearest_by_angle_is_the_scans_answer_across_the_turn() {
+        // Rim angles as atan2 gives them (sorted, one turn), and queries
+        // all round, including past either end of the list.
+        let by_angle: Vec<(f64, usize)> = [-3.05, -2.0, -0.4, 0.3, 1.7, 2.95]
+            .into_iter()
+            .enumerate()
+            .map(|(i, a)| (a, i))
+            .collect();
+        for k in 0..720 {
+            let angle = -std::f64::consts::PI + f64::from(k) * std::f64::consts::TAU / 720.0;
+            let scan = by_angle
+                .iter()
+                .min_by(|x, y| {
+                    super::super::angle_gap(x.0, angle)
+                        .total_cmp(&super::super::angle_gap(y.0, angle))
+                })
+                .map(|e| e.1);
+            assert_eq!(nearest(&by_angle, angle).map(|e| e.1), scan, "at {angle}");
+        }
+        assert!(nearest::<usize>(&[], 0.0).is_none());
+    }
     use image::Luma;
     use nalgebra::Matrix3;
 

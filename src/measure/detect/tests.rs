@@ -549,3 +549,44 @@ fn a_ring_whose_canopy_would_be_off_the_frame_is_not_a_drogue() {
     });
     assert!(detector(&cam).detect(&img, None).is_none());
 }
+
+#[test]
+fn a_seed_on_a_verified_rim_is_not_verified_again() {
+    // The probe hides the lower part of the rim: the disc scores below
+    // accept_score, so every seed of its region is tried; a second seed
+    // on the same disc must stop at its first fit, one elsewhere must not.
+    let (w, h) = (400, 300);
+    let cam = camera(w, h);
+    let truth = Ellipse::new(190.6, 120.2, 50.0, 47.0, 0.1);
+    let mut scene = Scene::new(truth);
+    scene.bar = Some(([190.6, 128.0], 46.0, 42.0));
+    let img = scene.render(w, h, 2.0, 2);
+    let mut detector = detector(&cam);
+    let seed = |centre_px: [f64; 2], radius: f64| search::Seed {
+        centre_px,
+        a_px: radius,
+        b_px: radius,
+        theta: 0.0,
+        reach: 1.8,
+        kind: 0,
+    };
+    let first = detector
+        .verify_seed(&img, &seed([190.0, 118.0], 45.0), 0, &[])
+        .expect("the disc verifies");
+    assert!(
+        truth.max_param_error_px(&first.ellipse) < 1.0,
+        "{:?}",
+        first.ellipse
+    );
+    let again = detector.verify_seed(&img, &seed([186.0, 115.0], 40.0), 1, &[first]);
+    assert_eq!(again.err(), Some(Reject::Known));
+    // Without the known candidate the same seed verifies to the same rim.
+    let alone = detector
+        .verify_seed(&img, &seed([186.0, 115.0], 40.0), 1, &[])
+        .expect("the disc verifies");
+    assert!(
+        truth.max_param_error_px(&alone.ellipse) < 1.0,
+        "{:?}",
+        alone.ellipse
+    );
+}
