@@ -198,16 +198,20 @@ fn clean_disc_gives_subpixel_rim_points() {
     assert!(truth.theta_error_rad(&e).to_degrees() < 0.2, "{e:?}");
 }
 
-#[test]
-fn probe_hiding_forty_percent_of_the_rim() {
+/// A 400x300 frame whose disc (the returned truth) has a bar from below,
+/// as wide as the disc and reaching past its centre: it hides the lower
+/// ~40 % of the rim and merges with the disc.
+fn probe_scene() -> (CameraModel, Ellipse, GrayImage) {
     let (w, h) = (400, 300);
-    let cam = camera(w, h);
     let truth = Ellipse::new(190.6, 120.2, 50.0, 47.0, 0.1);
     let mut scene = Scene::new(truth);
-    // A bar from below, as wide as the disc, reaching past its centre:
-    // it hides the lower ~40 % of the rim and merges with the disc.
     scene.bar = Some(([190.6, 128.0], 46.0, 42.0));
-    let img = scene.render(w, h, 2.0, 2);
+    (camera(w, h), truth, scene.render(w, h, 2.0, 2))
+}
+
+#[test]
+fn probe_hiding_forty_percent_of_the_rim() {
+    let (cam, truth, img) = probe_scene();
     let c = detector(&cam).detect(&img, None).expect("detected");
     let inliers: Vec<[f64; 2]> = {
         let conic = truth.to_conic();
@@ -554,13 +558,8 @@ fn a_ring_whose_canopy_would_be_off_the_frame_is_not_a_drogue() {
 fn a_seed_on_a_verified_rim_is_not_verified_again() {
     // The probe hides the lower part of the rim: the disc scores below
     // accept_score, so every seed of its region is tried; a second seed
-    // on the same disc must stop at its first fit, one elsewhere must not.
-    let (w, h) = (400, 300);
-    let cam = camera(w, h);
-    let truth = Ellipse::new(190.6, 120.2, 50.0, 47.0, 0.1);
-    let mut scene = Scene::new(truth);
-    scene.bar = Some(([190.6, 128.0], 46.0, 42.0));
-    let img = scene.render(w, h, 2.0, 2);
+    // on the same disc must stop at its first fit.
+    let (cam, truth, img) = probe_scene();
     let mut detector = detector(&cam);
     let seed = |centre_px: [f64; 2], radius: f64| search::Seed {
         centre_px,
