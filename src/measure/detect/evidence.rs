@@ -83,7 +83,8 @@ impl Detector {
             ellipse,
             centre,
             points_px,
-            undistorted,
+            measured_px,
+            measured_undistorted,
             residuals,
             inliers,
             step_widths_px,
@@ -184,8 +185,8 @@ impl Detector {
             .collect();
         Ok(Verified {
             ellipse,
-            points_px: near(points_px),
-            undistorted: near(undistorted),
+            points_px: near(measured_px),
+            undistorted: near(measured_undistorted),
             score,
             rim_contrast,
             step_widths_px,

@@ -589,3 +589,46 @@ fn a_seed_on_a_verified_rim_is_not_verified_again() {
         alone.ellipse
     );
 }
+
+/// A box-blurred step (8 px) from a flat dark side onto a light side that
+/// brightens outward (3 % of the contrast per pixel, as a canopy shaded
+/// toward the disc), the edge at 20 px: the flat levels' mid-level crossing
+/// lies outward of it (analytically `g L (D/2 - L/8) / contrast`, about
+/// 0.35 px here); placed for the shading, within 0.05 px of it.
+#[test]
+fn a_blurred_edge_on_a_shaded_canopy_is_placed_at_the_edge() {
+    let (edge, blur, dark, contrast, slope) = (20.0, 8.0, 40.0, 100.0, 3.0);
+    // The sharp profile, and its box blur by exact integration over the
+    // blur's length: dark inside, light + slope * (s - edge) outside.
+    let integral = |s: f64| {
+        if s <= edge {
+            dark * s
+        } else {
+            dark * edge + (dark + contrast) * (s - edge) + 0.5 * slope * (s - edge).powi(2)
+        }
+    };
+    let blurred = |s: f64| (integral(s + blur / 2.0) - integral(s - blur / 2.0)) / blur;
+    let profile: Vec<f32> = (0..80)
+        .map(|k| blurred(f64::from(k) * 0.5) as f32)
+        .collect();
+    let e = super::rim::strongest_rise(&profile, 0.0, 0.5, 10.0).expect("a step");
+    assert!(
+        e.s - edge > 0.2,
+        "the flat levels' crossing is {:.3} px from the edge",
+        e.s - edge
+    );
+    // Every ray of the pass sees the same canopy: 12 of them.
+    let edges: Vec<_> = (0..12)
+        .map(|_| super::verify::ShadedEdge::new([1.0, 0.0], &e))
+        .collect();
+    let points = vec![[e.s, 0.0]; 12];
+    let moved = super::verify::shaded_points(&points, &edges);
+    for p in moved {
+        assert!(
+            (p[0] - edge).abs() < 0.05,
+            "placed {:.3} px from the edge (flat: {:.3})",
+            p[0] - edge,
+            e.s - edge
+        );
+    }
+}
