@@ -3,6 +3,7 @@
 //! codes at all, and with `NO_COLOR` none on a terminal either.
 
 use std::process::Command;
+use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::{Duration, Instant};
 
 const BIN: &str = env!("CARGO_BIN_EXE_drogue-vision");
@@ -40,7 +41,12 @@ fn pane_while_running(extra_env: &str) -> Option<String> {
         return None;
     }
     let dir = tempfile::tempdir().unwrap();
-    let session = format!("dv-status-{}", std::process::id());
+    // One name per call: the tests run in parallel threads of one process,
+    // and a second session of the same name is refused ("duplicate
+    // session"), which failed one of them now and then.
+    static CALLS: AtomicUsize = AtomicUsize::new(0);
+    let call = CALLS.fetch_add(1, Ordering::Relaxed);
+    let session = format!("dv-status-{}-{call}", std::process::id());
     let cmd = format!(
         "{extra_env} {BIN} run --source sim:approach --max-frames 150 \
          --mavlink udpout:127.0.0.1:9 --log-dir {}; sleep 30",
@@ -61,7 +67,7 @@ fn pane_while_running(extra_env: &str) -> Option<String> {
         .status()
         .unwrap()
         .success();
-    assert!(ok, "tmux new-session failed");
+    assert!(ok, "tmux new-session -s {session} failed");
     // The line appears after about a second; poll the pane for it.
     let end = Instant::now() + Duration::from_secs(20);
     let mut seen = String::new();
