@@ -83,7 +83,8 @@ pub(super) struct ShadedEdge {
     relative_slope: f64,
     /// The step's contrast, gray levels.
     contrast: f64,
-    /// The step's width, pixels.
+    /// The step's width as seen (blur and the profile's smoothing
+    /// together), pixels.
     width_px: f64,
 }
 
@@ -110,7 +111,10 @@ impl ShadedEdge {
 /// and the crossing too far out by that over the ramp's slope: nothing on a
 /// sharp step, a quarter pixel at 8 px of motion blur, all round the rim
 /// where the blur runs along it (the disc fitted too large, the range too
-/// short by 0.1-0.6 % on the reference renderer's blurred and hazy sets).
+/// short by 0.1-0.6 % on average on the reference renderer's blurred and
+/// hazy sets). Less the part that levels taken at the edge itself leave: a
+/// box blur of width `L` (the step's width as seen, blur and smoothing
+/// together) over a side of slope `g` lifts the ramp's middle by `g L / 8`.
 /// The shading is one property of the canopy, so its slope is the median
 /// over the pass's rays of each ray's light-side slope relative to its
 /// contrast (one ray's slope, over a few samples, is mostly noise), and
@@ -388,11 +392,6 @@ impl Detector {
         if rays_in_image < rays / 4 {
             return Err(Reject::OutOfImage);
         }
-        let measured_px = shaded_points(&points_px, &shading);
-        let measured_undistorted = measured_px
-            .iter()
-            .map(|&p| self.camera.undistort_px(p))
-            .collect();
         if undistorted.len() < self.cfg.min_rim_points as usize {
             return Err(Reject::FewEdges(undistorted.len()));
         }
@@ -444,6 +443,11 @@ impl Detector {
             return Err(Reject::LightInside(fill));
         }
         let shape = inliers.len() as f64 / rays_in_image as f64;
+        let measured_px = shaded_points(&points_px, &shading);
+        let measured_undistorted = measured_px
+            .iter()
+            .map(|&p| self.camera.undistort_px(p))
+            .collect();
         Ok(RimPass {
             ellipse,
             centre,
