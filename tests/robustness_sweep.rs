@@ -70,7 +70,7 @@ const LIMITS: &[Limit] = &[
     limit("motion blur 4 px", Some(100), 0, Some(0.02), Some(0.059), Some(0.67)),
     limit("motion blur 8 px", Some(100), 0, Some(0.027), Some(0.095), Some(0.98)),
     limit("motion blur 16 px", Some(100), 6, Some(0.043), Some(0.443), Some(1.2)),
-    limit("motion blur 32 px", Some(50), 4, Some(0.863), Some(0.69), Some(2.13)),
+    limit("motion blur 32 px", Some(50), 4, Some(0.863), Some(0.292), Some(6.36)),
     limit("noise sigma 2", Some(100), 0, Some(0.02), Some(0.056), Some(0.31)),
     limit("noise sigma 5", Some(100), 0, Some(0.013), Some(0.034), Some(0.16)),
     limit("noise sigma 10", Some(100), 0, Some(0.038), Some(0.079), Some(0.25)),

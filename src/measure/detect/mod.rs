@@ -128,6 +128,22 @@ fn smoothing_half(sigma: f64) -> usize {
     (((m - 1.0) / 2.0).max(0.0).round() as usize).min(MAX_SMOOTH_HALF)
 }
 
+/// The noise, as a share of a step's contrast, that a profile is smoothed
+/// down to: 3 gray levels ([`SMOOTHED_NOISE_GRAY`]) on a step of 100. On
+/// a faint step (haze, low exposure: 30 gray levels) the same 3 gray levels
+/// decide where a blurred ramp starts and ends, so its levels are taken
+/// inside the ramp and its crossing moves along the blur.
+const SMOOTHED_NOISE_SHARE: f64 = 0.03;
+
+/// [`smoothing_half`] for a step of `contrast` gray levels: the kernel that
+/// brings the noise to [`SMOOTHED_NOISE_SHARE`] of the contrast.
+fn smoothing_half_for_contrast(sigma: f64, contrast: f64) -> usize {
+    if contrast.is_nan() || contrast <= 0.0 {
+        return 0;
+    }
+    smoothing_half(sigma * SMOOTHED_NOISE_GRAY / (SMOOTHED_NOISE_SHARE * contrast))
+}
+
 /// Gray level from which a sample counts as saturated (glare): it says
 /// nothing about the surface under it.
 const SATURATED_GRAY: f32 = 250.0;
@@ -203,6 +219,8 @@ pub struct Detector {
     /// Half-width (samples) of the narrow pass's profile smoothing, from
     /// this frame's noise.
     smooth_half: usize,
+    /// The frame's noise, gray levels ([`rim::noise_sigma`]).
+    noise_gray: f64,
     /// [`rim::smoothing_spread_px`] for each half-width up to
     /// [`MAX_SMOOTH_HALF`].
     smoothing_spread_px: Vec<f64>,
@@ -274,6 +292,7 @@ impl Detector {
             scratch: Vec::new(),
             raw_profile: Vec::new(),
             smooth_half: 0,
+            noise_gray: 0.0,
             smoothing_spread_px: (0..=MAX_SMOOTH_HALF)
                 .map(|h| rim::smoothing_spread_px(h, NARROW_STEP_PX))
                 .collect(),
@@ -323,6 +342,7 @@ impl Detector {
     fn measure_noise(&mut self, image: &GrayImage) {
         let noise = rim::noise_sigma(image);
         self.smooth_half = smoothing_half(noise);
+        self.noise_gray = noise;
         tracing::debug!(noise, smooth_half = self.smooth_half, "frame noise");
     }
 

@@ -632,3 +632,29 @@ fn a_blurred_edge_on_a_shaded_canopy_is_placed_at_the_edge() {
         );
     }
 }
+
+/// The measurement's smoothing follows the noise relative to the step: on a
+/// step of 100 gray levels it is the frame's noise-only smoothing, on a
+/// faint one (a third of that, as in haze) the same noise is smoothed as if
+/// it were three times larger, and nothing is smoothed for no step.
+#[test]
+fn a_faint_step_is_smoothed_as_much_as_stronger_noise() {
+    for sigma in [1.0, 3.0, 4.0, 6.0, 9.0] {
+        assert_eq!(
+            super::smoothing_half_for_contrast(sigma, 100.0),
+            super::smoothing_half(sigma),
+            "sigma {sigma}"
+        );
+        assert_eq!(
+            super::smoothing_half_for_contrast(sigma, 100.0 / 3.0),
+            super::smoothing_half(3.0 * sigma),
+            "sigma {sigma}"
+        );
+        assert_eq!(super::smoothing_half_for_contrast(sigma, 0.0), 0);
+        assert_eq!(super::smoothing_half_for_contrast(sigma, f64::NAN), 0);
+    }
+    // Noise 3 on a 30-level step: the +-2 px kernel, which the frame's
+    // noise alone (3 gray levels) would not get.
+    assert_eq!(super::smoothing_half(3.0), 0);
+    assert_eq!(super::smoothing_half_for_contrast(3.0, 30.0), 2);
+}

@@ -5,7 +5,7 @@
 use super::search::Seed;
 use super::{
     Detector, Reject, SATURATED_GRAY, Verified, conic_fit, median, polar_radius,
-    polar_radius_local, ray_directions, rim,
+    polar_radius_local, ray_directions, rim, smoothing_half_for_contrast,
 };
 use crate::measure::ellipse::Ellipse;
 use image::GrayImage;
@@ -299,12 +299,15 @@ impl Detector {
         let mut widen = 1.0;
         let (mut points_px, mut undistorted, mut contrasts, mut mid_levels, mut widths);
         let mut shading: Vec<ShadedEdge>;
+        let mut measured_base: Vec<[f64; 2]>;
+        let mut faint_profile = Vec::new();
         let mut rays_in_image;
         let mut clipped_share;
         loop {
             points_px = Vec::with_capacity(rays);
             undistorted = Vec::with_capacity(rays);
             shading = Vec::with_capacity(rays);
+            measured_base = Vec::with_capacity(rays);
             contrasts = Vec::with_capacity(rays);
             mid_levels = Vec::with_capacity(rays);
             widths = Vec::with_capacity(rays);
@@ -338,7 +341,8 @@ impl Detector {
                 rim::profile(image, centre, dir, s0, s1, 0.5, &mut self.profile);
                 // In noise, the step is located on the smoothed profile: its
                 // ends and levels are then the step's, not the noise's.
-                let half = self.smooth_half.min((0.1 * r) as usize);
+                let cap = (0.1 * r) as usize;
+                let half = self.smooth_half.min(cap);
                 if half > 0 {
                     self.raw_profile.clone_from(&self.profile);
                     rim::smooth(&mut self.profile, half, &mut self.scratch);
@@ -366,7 +370,39 @@ impl Detector {
                     let p = [centre[0] + e.s * dir[0], centre[1] + e.s * dir[1]];
                     points_px.push(p);
                     undistorted.push(self.camera.undistort_px(p));
-                    shading.push(ShadedEdge::new(dir, &e));
+                    // The point the pose is measured from: on a faint step
+                    // the profile is smoothed in proportion to its contrast.
+                    let m_half =
+                        smoothing_half_for_contrast(self.noise_gray, f64::from(e.light - e.dark))
+                            .min(cap);
+                    let measured = if m_half > half {
+                        let raw = if half > 0 {
+                            &self.raw_profile
+                        } else {
+                            &self.profile
+                        };
+                        faint_profile.clone_from(raw);
+                        rim::smooth(&mut faint_profile, m_half, &mut self.scratch);
+                        let reach = 0.5 * self.smoothing_spread_px[m_half] + 1.0;
+                        rim::strongest_rise(&faint_profile, s0, 0.5, min_contrast)
+                            .map(|mut m| {
+                                let mid = 0.5 * (m.dark + m.light);
+                                if let Some(s) = rim::crossing_near(raw, s0, 0.5, mid, m.s, reach) {
+                                    m.s = s;
+                                }
+                                m
+                            })
+                            // The same step, not another one in the window.
+                            .filter(|m| (m.s - e.s).abs() <= reach.max(e.light_s - e.s))
+                            .unwrap_or(e)
+                    } else {
+                        e
+                    };
+                    measured_base.push([
+                        centre[0] + measured.s * dir[0],
+                        centre[1] + measured.s * dir[1],
+                    ]);
+                    shading.push(ShadedEdge::new(dir, &measured));
                     contrasts.push(f64::from(e.light - e.dark));
                     mid_levels.push(0.5 * (e.dark + e.light));
                     // The smoothing's own spread is not the step's.
@@ -443,7 +479,7 @@ impl Detector {
             return Err(Reject::LightInside(fill));
         }
         let shape = inliers.len() as f64 / rays_in_image as f64;
-        let measured_px = shaded_points(&points_px, &shading);
+        let measured_px = shaded_points(&measured_base, &shading);
         let measured_undistorted = measured_px
             .iter()
             .map(|&p| self.camera.undistort_px(p))
