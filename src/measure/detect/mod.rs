@@ -34,6 +34,7 @@ use coarse::{Blob, BlobFinder, Decimated};
 use image::GrayImage;
 use serde::{Deserialize, Serialize};
 use std::f64::consts::TAU;
+use verify::RimUse;
 
 /// Detection tunables (`[detect]` in the config).
 #[derive(Clone, Debug, Serialize, Deserialize)]
@@ -313,6 +314,7 @@ impl Detector {
                 h,
                 self.cfg.rim_point_spacing_px,
                 self.cfg.tracked_max_rim_points,
+                RimUse::Measure,
             ) {
                 Ok(v) => return Some(v.into_candidate()),
                 Err(why) => tracing::debug!(?why, "not at the tracked ellipse: full search"),
@@ -357,7 +359,13 @@ impl Detector {
         let spacing = self.cfg.rim_point_spacing_px;
         let max_points = self.cfg.max_rim_points;
         verified.into_iter().find_map(|scouted| {
-            match self.verify_settled(image, &scouted.ellipse, spacing, max_points) {
+            match self.verify_settled(
+                image,
+                &scouted.ellipse,
+                spacing,
+                max_points,
+                RimUse::Measure,
+            ) {
                 Ok(full) => Some(full),
                 Err(why) => {
                     tracing::debug!(

@@ -488,7 +488,13 @@ fn the_canopy_taken_for_the_disc_gives_way_to_the_disc_inside() {
         truth.theta,
     );
     let outer = detector
-        .verify_settled(&img, &canopy, spacing, max_points)
+        .verify_settled(
+            &img,
+            &canopy,
+            spacing,
+            max_points,
+            super::verify::RimUse::Scout,
+        )
         .expect("the canopy's outer rim verifies as a disc");
     assert!(
         (outer.ellipse.a / canopy.a - 1.0).abs() < 0.05,
@@ -501,7 +507,13 @@ fn the_canopy_taken_for_the_disc_gives_way_to_the_disc_inside() {
         "{chosen:?} for {truth:?}"
     );
     let disc = detector
-        .verify_settled(&img, &truth, spacing, max_points)
+        .verify_settled(
+            &img,
+            &truth,
+            spacing,
+            max_points,
+            super::verify::RimUse::Scout,
+        )
         .expect("the disc verifies");
     let kept = detector.prefer_inner_disc(&img, disc, 0).ellipse;
     assert!((kept.a - truth.a).abs() < 1.0, "{kept:?}");

@@ -70,6 +70,18 @@ pub(super) struct RimPass {
     pub(super) mids: Vec<(f64, f32)>,
 }
 
+/// What a narrow pass's points are for: comparing candidates, or measuring
+/// the pose. Only the measuring pass places its points for a faint step's
+/// noise and the canopy's shading (the detection uses the unmoved points
+/// either way), so that the candidates' passes do not pay for it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) enum RimUse {
+    /// Scouting and comparing candidates.
+    Scout,
+    /// The pass whose points the pose is measured from.
+    Measure,
+}
+
 /// One ray's edge, for placing it on a shaded canopy.
 pub(super) struct ShadedEdge {
     /// The ray's direction (unit, distorted pixels).
@@ -238,6 +250,7 @@ impl Detector {
             &first,
             SCOUT_SPACING_FACTOR * self.cfg.rim_point_spacing_px,
             self.cfg.max_rim_points,
+            RimUse::Scout,
         )
     }
 
@@ -260,13 +273,14 @@ impl Detector {
         start: &Ellipse,
         spacing_px: f64,
         max_points: u32,
+        rim_use: RimUse,
     ) -> Result<Verified, Reject> {
         // The canopy evidence (a second ray pass) is looked at only on the
         // pass that is kept: a pass that moves the ellipse is followed by
         // another one.
         let mut previous = *start;
         for round in 0..3 {
-            let pass = self.rim_pass(image, &previous, spacing_px, max_points)?;
+            let pass = self.rim_pass(image, &previous, spacing_px, max_points, rim_use)?;
             if round == 2 || pass.ellipse.max_param_error_px(&previous) <= 0.5 {
                 return self.score(image, pass);
             }
@@ -283,6 +297,7 @@ impl Detector {
         start: &Ellipse,
         spacing_px: f64,
         max_points: u32,
+        rim_use: RimUse,
     ) -> Result<RimPass, Reject> {
         let centre = self.camera.distort_px([start.cx, start.cy]);
         let perimeter = TAU * ((start.a * start.a + start.b * start.b) / 2.0).sqrt();
@@ -375,7 +390,7 @@ impl Detector {
                     let m_half =
                         smoothing_half_for_contrast(self.noise_gray, f64::from(e.light - e.dark))
                             .min(cap);
-                    let measured = if m_half > half {
+                    let measured = if rim_use == RimUse::Measure && m_half > half {
                         let raw = if half > 0 {
                             &self.raw_profile
                         } else {
@@ -479,7 +494,10 @@ impl Detector {
             return Err(Reject::LightInside(fill));
         }
         let shape = inliers.len() as f64 / rays_in_image as f64;
-        let measured_px = shaded_points(&measured_base, &shading);
+        let measured_px = match rim_use {
+            RimUse::Measure => shaded_points(&measured_base, &shading),
+            RimUse::Scout => measured_base,
+        };
         let measured_undistorted = measured_px
             .iter()
             .map(|&p| self.camera.undistort_px(p))
