@@ -47,10 +47,6 @@ pub struct RayEdge {
     /// Distance from the ray's origin where the light level begins (the
     /// step's outer end), pixels.
     pub light_s: f64,
-    /// Slope of the light side beyond the step, gray levels per pixel
-    /// outward: a least-squares line through [`SLOPE_SAMPLES`] samples
-    /// from `light_s` (NaN where the profile ends sooner).
-    pub light_slope: f32,
     /// Slope of the profile where it crosses the mid level, gray levels per
     /// pixel.
     pub ramp_slope: f32,
@@ -302,15 +298,16 @@ pub fn smoothing_spread_px(half: usize, step: f64) -> f64 {
     (width(half) - width(0)).max(0.0)
 }
 
-/// Samples beyond a step's light end that [`RayEdge::light_slope`] is
-/// fitted to.
+/// Samples beyond a step's light end that [`light_side_slope`] fits.
 pub const SLOPE_SAMPLES: usize = 6;
 
-/// Slope (per pixel) of the least-squares line through the
-/// [`SLOPE_SAMPLES`] samples of `p` from `from`, sampled every `step`
-/// pixels; NaN where the profile ends sooner.
-fn line_slope(p: &[f32], from: usize, step: f64) -> f32 {
-    let Some(window) = p.get(from..from + SLOPE_SAMPLES) else {
+/// Slope of the light side beyond step `e` of profile `p` (sampled from
+/// `s_min` every `step` px, the profile `e` was found on), gray levels per
+/// pixel outward: the least-squares line through the [`SLOPE_SAMPLES`]
+/// samples from `e.light_s`; NaN where the profile ends sooner.
+pub fn light_side_slope(p: &[f32], s_min: f64, step: f64, e: &RayEdge) -> f32 {
+    let from = ((e.light_s - s_min) / step).round().max(0.0) as usize;
+    let Some(window) = p.get(from..from.saturating_add(SLOPE_SAMPLES)) else {
         return f32::NAN;
     };
     let mean_x = 0.5 * (SLOPE_SAMPLES - 1) as f32;
@@ -390,7 +387,6 @@ pub fn strongest_rise(p: &[f32], s_min: f64, step: f64, min_contrast: f32) -> Op
         dark,
         light,
         light_s: s_min + light_start as f64 * step,
-        light_slope: line_slope(p, light_start, step),
         ramp_slope: (b - a) / step as f32,
         clipped: kl <= 1 || kr + 2 >= n,
     })

@@ -631,7 +631,10 @@ fn a_blurred_edge_on_a_shaded_canopy_is_placed_at_the_edge() {
     );
     // Every ray of the pass sees the same canopy: 12 of them.
     let edges: Vec<_> = (0..12)
-        .map(|_| super::verify::ShadedEdge::new([1.0, 0.0], &e))
+        .map(|_| {
+            let slope = super::rim::light_side_slope(&profile, 0.0, 0.5, &e);
+            super::verify::ShadedEdge::new([1.0, 0.0], &e, slope)
+        })
         .collect();
     let points = vec![[e.s, 0.0]; 12];
     let moved = super::verify::shaded_points(&points, &edges);

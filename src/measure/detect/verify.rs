@@ -101,15 +101,16 @@ pub(super) struct ShadedEdge {
 }
 
 impl ShadedEdge {
-    /// The edge `e` found on the ray in direction `dir`.
-    pub(super) fn new(dir: [f64; 2], e: &rim::RayEdge) -> Self {
+    /// The edge `e` found on the ray in direction `dir`, with its light
+    /// side's slope ([`rim::light_side_slope`], gray levels per pixel).
+    pub(super) fn new(dir: [f64; 2], e: &rim::RayEdge, light_slope: f32) -> Self {
         Self {
             dir,
             // The light level is the mean of three samples from `light_s`:
             // its centre is a sample (0.5 px) further.
             level_distance_px: e.light_s + 0.5 - e.s,
             ramp_slope: f64::from(e.ramp_slope),
-            relative_slope: f64::from(e.light_slope / (e.light - e.dark)),
+            relative_slope: f64::from(light_slope / (e.light - e.dark)),
             contrast: f64::from(e.light - e.dark),
             width_px: 2.0 * (e.light_s - e.s),
         }
@@ -289,6 +290,50 @@ impl Detector {
         Err(Reject::Unsettled)
     }
 
+    /// The edge the pose is measured from on the ray whose detection edge
+    /// `e` was found on `self.profile` (smoothed with `half`, the raw
+    /// samples then in `self.raw_profile`; from `s0` every 0.5 px), and its
+    /// light side's slope. On a faint step the raw profile is smoothed
+    /// further, in proportion to the step's contrast
+    /// ([`smoothing_half_for_contrast`], at most `cap`), into `faint`; the
+    /// step found there is kept when it is the same step.
+    fn measured_edge(
+        &mut self,
+        e: &rim::RayEdge,
+        half: usize,
+        cap: usize,
+        s0: f64,
+        faint: &mut Vec<f32>,
+    ) -> (rim::RayEdge, f32) {
+        let min_contrast = self.cfg.min_contrast_gray as f32;
+        let own = || (*e, rim::light_side_slope(&self.profile, s0, 0.5, e));
+        let m_half =
+            smoothing_half_for_contrast(self.noise_gray, f64::from(e.light - e.dark)).min(cap);
+        if m_half <= half {
+            return own();
+        }
+        let raw = if half > 0 {
+            &self.raw_profile
+        } else {
+            &self.profile
+        };
+        faint.clone_from(raw);
+        rim::smooth(faint, m_half, &mut self.scratch);
+        let reach = 0.5 * self.smoothing_spread_px[m_half] + 1.0;
+        let Some(mut m) = rim::strongest_rise(faint, s0, 0.5, min_contrast) else {
+            return own();
+        };
+        let mid = 0.5 * (m.dark + m.light);
+        if let Some(s) = rim::crossing_near(raw, s0, 0.5, mid, m.s, reach) {
+            m.s = s;
+        }
+        // The same step, not another one in the window.
+        if (m.s - e.s).abs() > reach.max(e.light_s - e.s) {
+            return own();
+        }
+        (m, rim::light_side_slope(faint, s0, 0.5, &m))
+    }
+
     /// The narrow ray pass around `start` and the robust refit, with the
     /// checks of the rim itself (size, shape, contrast, one dark inside).
     fn rim_pass(
@@ -315,7 +360,7 @@ impl Detector {
         let (mut points_px, mut undistorted, mut contrasts, mut mid_levels, mut widths);
         let mut shading: Vec<ShadedEdge>;
         let mut measured_base: Vec<[f64; 2]>;
-        let mut faint_profile = Vec::new();
+        let mut faint = Vec::new();
         let mut rays_in_image;
         let mut clipped_share;
         loop {
@@ -385,39 +430,15 @@ impl Detector {
                     let p = [centre[0] + e.s * dir[0], centre[1] + e.s * dir[1]];
                     points_px.push(p);
                     undistorted.push(self.camera.undistort_px(p));
-                    // The point the pose is measured from: on a faint step
-                    // the profile is smoothed in proportion to its contrast.
-                    let m_half =
-                        smoothing_half_for_contrast(self.noise_gray, f64::from(e.light - e.dark))
-                            .min(cap);
-                    let measured = if rim_use == RimUse::Measure && m_half > half {
-                        let raw = if half > 0 {
-                            &self.raw_profile
-                        } else {
-                            &self.profile
-                        };
-                        faint_profile.clone_from(raw);
-                        rim::smooth(&mut faint_profile, m_half, &mut self.scratch);
-                        let reach = 0.5 * self.smoothing_spread_px[m_half] + 1.0;
-                        rim::strongest_rise(&faint_profile, s0, 0.5, min_contrast)
-                            .map(|mut m| {
-                                let mid = 0.5 * (m.dark + m.light);
-                                if let Some(s) = rim::crossing_near(raw, s0, 0.5, mid, m.s, reach) {
-                                    m.s = s;
-                                }
-                                m
-                            })
-                            // The same step, not another one in the window.
-                            .filter(|m| (m.s - e.s).abs() <= reach.max(e.light_s - e.s))
-                            .unwrap_or(e)
-                    } else {
-                        e
-                    };
-                    measured_base.push([
-                        centre[0] + measured.s * dir[0],
-                        centre[1] + measured.s * dir[1],
-                    ]);
-                    shading.push(ShadedEdge::new(dir, &measured));
+                    if rim_use == RimUse::Measure {
+                        let (measured, light_slope) =
+                            self.measured_edge(&e, half, cap, s0, &mut faint);
+                        measured_base.push([
+                            centre[0] + measured.s * dir[0],
+                            centre[1] + measured.s * dir[1],
+                        ]);
+                        shading.push(ShadedEdge::new(dir, &measured, light_slope));
+                    }
                     contrasts.push(f64::from(e.light - e.dark));
                     mid_levels.push(0.5 * (e.dark + e.light));
                     // The smoothing's own spread is not the step's.
@@ -494,14 +515,14 @@ impl Detector {
             return Err(Reject::LightInside(fill));
         }
         let shape = inliers.len() as f64 / rays_in_image as f64;
-        let measured_px = match rim_use {
-            RimUse::Measure => shaded_points(&measured_base, &shading),
-            RimUse::Scout => measured_base,
+        let (measured_px, measured_undistorted) = match rim_use {
+            RimUse::Measure => {
+                let moved = shaded_points(&measured_base, &shading);
+                let undistorted = moved.iter().map(|&p| self.camera.undistort_px(p)).collect();
+                (moved, undistorted)
+            }
+            RimUse::Scout => (points_px.clone(), undistorted.clone()),
         };
-        let measured_undistorted = measured_px
-            .iter()
-            .map(|&p| self.camera.undistort_px(p))
-            .collect();
         Ok(RimPass {
             ellipse,
             centre,
