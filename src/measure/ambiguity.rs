@@ -97,27 +97,33 @@ enum Polarity {
     Darkening,
 }
 
-/// Where across the predicted curve the strongest outward brightening lies:
-/// its offset from `p` along the unit image direction `out` (pixels,
-/// sub-pixel by a parabola through the peak) if it is within `SEARCH_PX` and
-/// at least `MIN_EDGE_GREY_PER_PX` strong; `Some(None)` for no edge; `None`
-/// if the search leaves the image. `grey` is scratch for the profile.
-/// With [`Polarity::Darkening`], the outermost local maximum of the outward
-/// darkening of that strength instead.
-fn outward_edge_offset(
+/// Grey values sampled across a predicted rim point, outward.
+type AcrossProfile = [f32; PROFILE_LEN];
+
+/// The grey values across the predicted curve at `p`, along the unit image
+/// direction `out`, from `SEARCH_PX + 1` px inside to as far outside;
+/// `None` if they leave the image. `grey` is scratch. One profile serves
+/// both polarities of [`edge_offset`].
+fn across_profile(
     image: &GrayImage,
     p: [f64; 2],
     out: [f64; 2],
     grey: &mut Vec<f32>,
-    polarity: Polarity,
-) -> Option<Option<f64>> {
+) -> Option<AcrossProfile> {
     // The detector's ray sampler: bilinear, stopping at the image border.
     let start = -SEARCH_PX - 1.0;
     let end = start + (PROFILE_LEN - 1) as f64 * SEARCH_STEP_PX;
     rim::profile(image, p, out, start, end, SEARCH_STEP_PX, grey);
-    if grey.len() < PROFILE_LEN {
-        return None;
-    }
+    grey.get(..PROFILE_LEN)?.try_into().ok()
+}
+
+/// Where across the predicted curve the strongest outward brightening lies
+/// on `grey` ([`across_profile`]): its offset from the predicted point
+/// (pixels, sub-pixel by a parabola through the peak) if it is within
+/// `SEARCH_PX` and at least `MIN_EDGE_GREY_PER_PX` strong; `None` for no
+/// edge. With [`Polarity::Darkening`], the outermost local maximum of the
+/// outward darkening of that strength instead.
+fn edge_offset(grey: &AcrossProfile, polarity: Polarity) -> Option<f64> {
     // Central difference over 2 px at each searched offset.
     let sign = match polarity {
         Polarity::Brightening => 1.0,
@@ -140,11 +146,9 @@ fn outward_edge_offset(
             (peak && g >= MIN_EDGE_GREY_PER_PX).then_some((i, g))
         }),
     };
-    let Some((i_best, best)) = found else {
-        return Some(None);
-    };
+    let (i_best, best) = found?;
     if best < MIN_EDGE_GREY_PER_PX {
-        return Some(None);
+        return None;
     }
     let mut offset = i_best as f64 * SEARCH_STEP_PX - SEARCH_PX;
     if i_best > 0 && i_best + 1 < SEARCH_STEPS {
@@ -154,7 +158,7 @@ fn outward_edge_offset(
             offset += 0.5 * (l - r) / curvature * SEARCH_STEP_PX;
         }
     }
-    Some(Some(offset))
+    Some(offset)
 }
 
 /// (cos t, sin t) of the `SAMPLES` points along the rim, computed once.
@@ -223,11 +227,12 @@ pub fn canopy_supports(
         return [None, None];
     };
     let best = |s: &[Option<f64>; 2]| s.iter().flatten().copied().reduce(f64::max);
-    let bright = supports_with(image, [rim0, rim1], Polarity::Brightening);
+    let profiles = [rim_profiles(image, rim0), rim_profiles(image, rim1)];
+    let bright = supports_with(&profiles, [rim0, rim1], Polarity::Brightening);
     if best(&bright).is_some_and(|b| b >= DARKENING_FALLBACK_BELOW) {
         return bright;
     }
-    let dark = supports_with(image, [rim0, rim1], Polarity::Darkening);
+    let dark = supports_with(&profiles, [rim0, rim1], Polarity::Darkening);
     match (best(&bright), best(&dark)) {
         (_, None) => bright,
         (Some(b), Some(d)) if b >= d => bright,
@@ -235,16 +240,14 @@ pub fn canopy_supports(
     }
 }
 
-/// [`canopy_supports`] for one polarity of the rim's edge.
+/// [`canopy_supports`] for one polarity of the rim's edge, from the two
+/// rims' [`rim_profiles`].
 fn supports_with(
-    image: &GrayImage,
+    profiles: &[Vec<Option<AcrossProfile>>; 2],
     [rim0, rim1]: [&[RimPoint]; 2],
     polarity: Polarity,
 ) -> [Option<f64>; 2] {
-    let offsets = [
-        edge_offsets(image, rim0, polarity),
-        edge_offsets(image, rim1, polarity),
-    ];
+    let offsets = profiles.each_ref().map(|p| edge_offsets(p, polarity));
     let in_image = |o: &[Option<Option<f64>>]| o.iter().filter(|x| x.is_some()).count();
     if offsets
         .iter()
@@ -302,16 +305,23 @@ fn supports_with(
     [Some(b / judged[0] as f64), Some(c / judged[1] as f64)]
 }
 
+/// Per rim point, its [`across_profile`] (`None`: outside the image).
+fn rim_profiles(image: &GrayImage, rim: &[RimPoint]) -> Vec<Option<AcrossProfile>> {
+    let mut grey = Vec::with_capacity(PROFILE_LEN);
+    rim.iter()
+        .map(|p| across_profile(image, p.at, p.out, &mut grey))
+        .collect()
+}
+
 /// Per rim point, the outward edge's offset from it (`Some(None)`: no edge,
 /// `None`: outside the image).
 fn edge_offsets(
-    image: &GrayImage,
-    rim: &[RimPoint],
+    profiles: &[Option<AcrossProfile>],
     polarity: Polarity,
 ) -> Vec<Option<Option<f64>>> {
-    let mut grey = Vec::with_capacity(PROFILE_LEN);
-    rim.iter()
-        .map(|p| outward_edge_offset(image, p.at, p.out, &mut grey, polarity))
+    profiles
+        .iter()
+        .map(|p| p.as_ref().map(|p| edge_offset(p, polarity)))
         .collect()
 }
 
@@ -418,10 +428,10 @@ fn support_on(
     let (mut in_image, mut judged, mut with_edge) = (0usize, 0usize, 0usize);
     let mut grey = Vec::with_capacity(PROFILE_LEN);
     for (k, p) in rim.iter().enumerate() {
-        let Some(edge) = outward_edge_offset(image, p.at, p.out, &mut grey, Polarity::Brightening)
-        else {
+        let Some(profile) = across_profile(image, p.at, p.out, &mut grey) else {
             continue;
         };
+        let edge = edge_offset(&profile, Polarity::Brightening);
         in_image += 1;
         if use_point(k) {
             judged += 1;
