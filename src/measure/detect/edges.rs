@@ -94,19 +94,23 @@ impl EdgeVoter {
     /// `min_gradient`, with its direction.
     fn collect_edges(&mut self, img: &Decimated, min_gradient: f64) {
         let (w, h) = (img.width, img.height);
-        let p = |x: usize, y: usize| i32::from(img.pixels[y * w + x]);
         let min2 = (min_gradient * 8.0).powi(2);
         self.edges.clear();
         for y in 1..h - 1 {
+            // The three rows, each cut to the window's columns: no bounds
+            // test per pixel.
+            let row = |y: usize| &img.pixels[y * w..(y + 1) * w];
+            let (above, here, below) = (row(y - 1), row(y), row(y + 1));
             for x in 1..w - 1 {
-                let gx = p(x + 1, y - 1) + 2 * p(x + 1, y) + p(x + 1, y + 1)
-                    - p(x - 1, y - 1)
-                    - 2 * p(x - 1, y)
-                    - p(x - 1, y + 1);
-                let gy = p(x - 1, y + 1) + 2 * p(x, y + 1) + p(x + 1, y + 1)
-                    - p(x - 1, y - 1)
-                    - 2 * p(x, y - 1)
-                    - p(x + 1, y - 1);
+                let p = |r: &[u8], x: usize| i32::from(r[x]);
+                let gx = p(above, x + 1) + 2 * p(here, x + 1) + p(below, x + 1)
+                    - p(above, x - 1)
+                    - 2 * p(here, x - 1)
+                    - p(below, x - 1);
+                let gy = p(below, x - 1) + 2 * p(below, x) + p(below, x + 1)
+                    - p(above, x - 1)
+                    - 2 * p(above, x)
+                    - p(above, x + 1);
                 let m2 = f64::from(gx * gx + gy * gy);
                 if m2 >= min2 {
                     let m = m2.sqrt();
@@ -139,11 +143,14 @@ impl EdgeVoter {
         };
         for &([x, y], [gx, gy]) in &self.edges {
             let (x, y) = (x as f32, y as f32);
-            for r in r_min..=r_max {
-                let r = r as f32;
+            // The radius counted in f32 (exact for these small integers):
+            // no integer-to-float conversion per vote.
+            let mut r = r_min as f32;
+            for _ in r_min..=r_max {
                 let i = cell(y - gy * r) * stride + cell(x - gx * r);
                 let v = &mut self.votes[i];
                 *v = v.saturating_add(1);
+                r += 1.0;
             }
         }
     }
@@ -162,15 +169,20 @@ impl EdgeVoter {
         r_min: usize,
         max_peaks: usize,
     ) -> Vec<(usize, usize, u32)> {
-        let sum3 = |x: usize, y: usize| -> u32 {
-            let mut s = 0u32;
-            for yy in y - 1..=y + 1 {
-                for xx in x - 1..=x + 1 {
-                    s += u32::from(self.votes_at(xx, yy));
-                }
+        // The 3x3 sums as sums of three rows' sums of three (one pass over
+        // the votes, not nine reads per cell).
+        let mut rows = vec![0u32; w * h];
+        for y in 0..h {
+            let row = &self.votes[(y + 1) * self.stride..][..w + 2];
+            for (sum, three) in rows[y * w + 1..(y + 1) * w - 1]
+                .iter_mut()
+                .zip(row[1..].windows(3))
+            {
+                *sum = three.iter().map(|&v| u32::from(v)).sum();
             }
-            s
-        };
+        }
+        let sum3 =
+            |x: usize, y: usize| rows[(y - 1) * w + x] + rows[y * w + x] + rows[(y + 1) * w + x];
         // The weakest peak worth a look: a fraction of the smallest rim.
         let floor = (MIN_RIM_SHARE * std::f64::consts::TAU * r_min as f64).ceil() as u32;
         let mut found: Vec<(usize, usize, u32)> = Vec::new();
@@ -186,9 +198,22 @@ impl EdgeVoter {
                 found.push((x, y, s));
             }
         }
+        // Each kept peak rules out at most the cells of its box, so the
+        // peaks kept are among the strongest `box * max_peaks + 1` (the
+        // earlier in raster order first among equals): only those are
+        // scanned below, found in linear time.
+        let box_cells = (2 * PEAK_SEPARATION + 1).pow(2) as usize;
+        let candidates = box_cells * max_peaks + 1;
+        if found.len() > candidates {
+            found.select_nth_unstable_by(candidates - 1, |a, b| {
+                b.2.cmp(&a.2).then((a.1, a.0).cmp(&(b.1, b.0)))
+            });
+            found.truncate(candidates);
+            found.sort_unstable_by_key(|p| (p.1, p.0));
+        }
         // Greedy: the strongest (the first in raster order among equals)
         // not near a kept one, until `max_peaks`. A scan per peak, not a
-        // sort of every voted pixel: `max_peaks` is a handful.
+        // sort of every candidate: `max_peaks` is a handful.
         let near = |k: &(usize, usize, u32), p: &(usize, usize, u32)| {
             (k.0 as i64 - p.0 as i64).abs() <= PEAK_SEPARATION
                 && (k.1 as i64 - p.1 as i64).abs() <= PEAK_SEPARATION
