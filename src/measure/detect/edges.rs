@@ -263,7 +263,7 @@ impl EdgeVoter {
 
 /// Keeps the `n` cells (x, y, votes) of `found` (in raster order) with the
 /// most votes, the earlier first among equals, in raster order: the votes'
-/// cutoff from a count of each value (linear, where a sort of the tens of
+/// cutoff from a count of each value (linear; a partial sort of the tens of
 /// thousands of voted cells was a tenth of the edge source's work).
 fn strongest_in_raster_order(found: &mut Vec<(usize, usize, u32)>, n: usize) {
     if found.len() <= n {

@@ -450,8 +450,15 @@ mod tests {
                 let base = 60.0 + 0.15 * f64::from(x) + 0.1 * f64::from(y);
                 image::Luma([(base + sigma * gauss()).round().clamp(1.0, 254.0) as u8])
             });
-            let est = noise_sigma(&img, 16);
-            assert!((est / sigma - 1.0).abs() < 0.1, "sigma {sigma}: {est}");
+            // Every 16th row (the full search's) and every 64th (a tracked
+            // frame's: 7 rows here).
+            for stride in [16, 64] {
+                let est = noise_sigma(&img, stride);
+                assert!(
+                    (est / sigma - 1.0).abs() < 0.1,
+                    "sigma {sigma}, stride {stride}: {est}"
+                );
+            }
         }
         assert_eq!(noise_sigma(&GrayImage::new(2, 2), 16), 0.0);
         assert_eq!(noise_sigma(&GrayImage::new(8, 8), 0), 0.0);
