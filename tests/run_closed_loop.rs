@@ -481,7 +481,19 @@ fn world_anchor_vehicle_flying_with_the_tanker() {
     let log = read_log(&only_log(&logs));
     let truths = logged_truths(&log);
     assert!(truths.len() >= 150, "{} frames", truths.len());
+    // Interpolated, not held: the receiver is where the script had it at the
+    // capture. A held report lags by 0 to 20 ms, 0 to 0.6 m at 30 m/s (a
+    // sixth of its frames within 0.1 m); an interpolated one is off by the
+    // error of the autopilot clock's offset only (TIMESYNC, or the arrival
+    // time before it converges): on an idle machine a median of 0.2 mm, but
+    // a CI run on a machine busy compiling once had 0 of 180 frames within
+    // 1 cm (not reproduced since; the offset's error over a loaded local
+    // link is the likely cause). 0.1 m is 3.3 ms: it still tells
+    // interpolated from held. The interpolation's accuracy itself is
+    // `link::telemetry`'s unit tests'.
+    const RECEIVER_TOLERANCE_M: f64 = 0.1;
     let mut receiver_ok = 0;
+    let mut receiver_errors = Vec::new();
     for t in &truths {
         let s = secs(t.capture_time_ns);
         let e = norm(sub(t.position_ned, drogue_at(s)));
@@ -489,13 +501,19 @@ fn world_anchor_vehicle_flying_with_the_tanker() {
         // at 30 m/s.
         assert!(e < 0.03, "truth drogue at {s:.3} s off by {e:.4} m");
         let flown_at = flown(s).position_ned_m.map(f64::from);
-        receiver_ok += usize::from(norm(sub(t.receiver_position_ned, flown_at)) < 0.01);
+        let e = norm(sub(t.receiver_position_ned, flown_at));
+        receiver_ok += usize::from(e < RECEIVER_TOLERANCE_M);
+        receiver_errors.push(e);
     }
-    // Interpolated, not held: the receiver is where the script had it at the
-    // capture (a held report would lag by up to 0.6 m).
+    receiver_errors.sort_by(f64::total_cmp);
+    eprintln!(
+        "world anchor: receiver at capture time off by median {:.4} m, max {:.4} m",
+        receiver_errors[receiver_errors.len() / 2],
+        receiver_errors[receiver_errors.len() - 1]
+    );
     assert!(
         receiver_ok * 10 >= truths.len() * 9,
-        "receiver at its capture-time pose on {receiver_ok} of {} frames",
+        "receiver at its capture-time pose (within {RECEIVER_TOLERANCE_M} m) on {receiver_ok} of {} frames",
         truths.len()
     );
 
