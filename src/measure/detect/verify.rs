@@ -366,8 +366,10 @@ impl Detector {
         loop {
             points_px = Vec::with_capacity(rays);
             undistorted = Vec::with_capacity(rays);
-            shading = Vec::with_capacity(rays);
-            measured_base = Vec::with_capacity(rays);
+            // Filled on the measuring pass only.
+            let measuring = if rim_use == RimUse::Measure { rays } else { 0 };
+            shading = Vec::with_capacity(measuring);
+            measured_base = Vec::with_capacity(measuring);
             contrasts = Vec::with_capacity(rays);
             mid_levels = Vec::with_capacity(rays);
             widths = Vec::with_capacity(rays);
@@ -521,7 +523,7 @@ impl Detector {
                 let undistorted = moved.iter().map(|&p| self.camera.undistort_px(p)).collect();
                 (moved, undistorted)
             }
-            RimUse::Scout => (points_px.clone(), undistorted.clone()),
+            RimUse::Scout => (points_px.clone(), undistorted),
         };
         Ok(RimPass {
             ellipse,
