@@ -30,7 +30,7 @@ mod verify;
 
 use super::ellipse::Ellipse;
 use crate::camera::CameraModel;
-use coarse::{Blob, BlobFinder, Decimated};
+use coarse::{Blob, BlobFinder, Decimated, LocalContrast};
 use image::GrayImage;
 use serde::{Deserialize, Serialize};
 use std::f64::consts::TAU;
@@ -89,6 +89,12 @@ pub struct DetectConfig {
     pub min_fill: f64,
     /// Seed of the random sampling (the detection is deterministic).
     pub seed: u64,
+    /// Whether the local-contrast source runs when the dark regions and the
+    /// edges gave no clear drogue (off by default: on the reference frames
+    /// it finds no disc the other sources miss, and its seeds inside a disc
+    /// under the probe's tip verify the tip; see the README's "Detection").
+    #[serde(default)]
+    pub local_contrast_source: bool,
 }
 
 /// The best candidate of a frame.
@@ -224,6 +230,10 @@ pub struct Detector {
     finder: BlobFinder,
     blobs: Vec<Blob>,
     voter: edges::EdgeVoter,
+    /// The local-contrast source's normalised frame and its labelling
+    /// (apart from `finder`'s, whose label images a frame reuses).
+    local: LocalContrast,
+    local_finder: BlobFinder,
     profile: Vec<f32>,
     scratch: Vec<f32>,
     /// The narrow pass's profile before smoothing.
@@ -300,6 +310,8 @@ impl Detector {
             finder: BlobFinder::default(),
             blobs: Vec::new(),
             voter: edges::EdgeVoter::default(),
+            local: LocalContrast::default(),
+            local_finder: BlobFinder::default(),
             profile: Vec::new(),
             scratch: Vec::new(),
             raw_profile: Vec::new(),

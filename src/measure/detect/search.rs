@@ -2,7 +2,7 @@
 //! and edge voting), their seeds, the budget and order in which they are
 //! verified, and the inner disc preferred to the canopy's rim.
 
-use super::coarse::Blob;
+use super::coarse::{self, Blob};
 use super::{Detector, Verified};
 use image::GrayImage;
 
@@ -28,6 +28,24 @@ const INNER_SEED_STREAM: u64 = 0x1_0000;
 /// Circles of the edge source verified per frame, strongest first.
 const EDGE_SEEDS: usize = 4;
 
+/// Regions of the locally normalised frame verified per frame (over all
+/// its windows), whole and round ones first, then larger first.
+const LOCAL_REGIONS: usize = 4;
+/// A pixel belongs to a dark region of the locally normalised frame at
+/// this many standard deviations below its neighbourhood's mean.
+const LOCAL_DARK_SIGMAS: f64 = 1.0;
+/// The local deviation's floor, as a share of the smallest rim step
+/// (`min_contrast_gray`): in flat sky a pixel must be this far below the
+/// mean besides, so that noise does not make regions.
+const LOCAL_FLOOR_CONTRAST: f64 = 0.25;
+/// Kinds of the local source's seeds: its regions' kinds 0-2 plus this.
+const LOCAL_KIND_OFFSET: u8 = 5;
+/// A region of a window is a disc of that window's sizes when its
+/// moment radius is from this share of the window's smallest disc radius
+/// to this many of its largest (a disc merged with a probe is longer).
+const LOCAL_MIN_RADIUS_SHARE: f64 = 0.5;
+const LOCAL_MAX_RADIUS_SHARE: f64 = 1.5;
+
 /// Where and how large a coarse candidate is, full-res distorted pixels.
 #[derive(Clone, Debug)]
 pub(super) struct Seed {
@@ -40,7 +58,8 @@ pub(super) struct Seed {
     /// Which point of its blob: 0 the centroid, 1 the deepest point, 2 the
     /// point best ringed by light; 3 a circle of the edge source; 4 the
     /// disc looked for inside a verified ellipse (see
-    /// [`Detector::prefer_inner_disc`]).
+    /// [`Detector::prefer_inner_disc`]); 5-7 as 0-2, of a region of the
+    /// locally normalised frame ([`Detector::try_local_contrast`]).
     pub(super) kind: u8,
 }
 
@@ -64,8 +83,56 @@ impl Seed {
     }
 }
 
+/// A dark region's seeds, in the order tried: the centroid with the moment
+/// ellipse, the deepest point with its inscribed circle (on the disc even
+/// when a hose or probe has merged with it) and the point best ringed by
+/// light, each when apart from the ones before. A region that is cut by the
+/// border or elongated (`round` false) is mostly not a disc: its centroid
+/// lies off any disc in it, the point ringed by light is the likeliest disc
+/// centre, then the deepest point. Kinds 0-2 plus `kind_offset`.
+fn region_seeds(b: &Blob, round: bool, kind_offset: u8) -> Vec<Seed> {
+    let mut seeds = vec![Seed {
+        centre_px: b.centre_px,
+        a_px: b.a_px,
+        b_px: b.b_px,
+        theta: b.theta,
+        reach: 1.8,
+        kind: kind_offset,
+    }];
+    let off = (b.core_px[0] - b.centre_px[0]).hypot(b.core_px[1] - b.centre_px[1]);
+    if off > 0.3 * b.core_radius_px {
+        seeds.push(Seed {
+            centre_px: b.core_px,
+            a_px: b.core_radius_px,
+            b_px: b.core_radius_px,
+            theta: 0.0,
+            reach: UNSURE_SEED_REACH,
+            kind: kind_offset + 1,
+        });
+    }
+    let off = (b.ringed_px[0] - b.centre_px[0]).hypot(b.ringed_px[1] - b.centre_px[1]);
+    let off_core = (b.ringed_px[0] - b.core_px[0]).hypot(b.ringed_px[1] - b.core_px[1]);
+    if b.ringed_light >= 0.5
+        && off > 0.3 * b.ringed_radius_px
+        && off_core > 0.3 * b.ringed_radius_px
+    {
+        seeds.push(Seed {
+            centre_px: b.ringed_px,
+            a_px: b.ringed_radius_px,
+            b_px: b.ringed_radius_px,
+            theta: 0.0,
+            reach: UNSURE_SEED_REACH,
+            kind: kind_offset + 2,
+        });
+    }
+    if !round {
+        seeds.reverse();
+    }
+    seeds
+}
+
 impl Detector {
-    /// The candidates of both sources, verified on the sparse rim, in the
+    /// The candidates of all three sources, verified on the sparse rim, in the
     /// order tried; the search ends at the first that scores `accept`.
     pub(super) fn verify_candidates(&mut self, image: &GrayImage, accept: f64) -> Vec<Verified> {
         self.decimated
@@ -153,49 +220,7 @@ impl Detector {
                 continue;
             }
             kept.push(b.clone());
-            // Two seeds: the centroid with the moment ellipse, and the
-            // deepest point with its inscribed circle (on the disc even when
-            // a hose or probe has merged with it).
-            let mut seeds = vec![Seed {
-                centre_px: b.centre_px,
-                a_px: b.a_px,
-                b_px: b.b_px,
-                theta: b.theta,
-                reach: 1.8,
-                kind: 0,
-            }];
-            let off = (b.core_px[0] - b.centre_px[0]).hypot(b.core_px[1] - b.centre_px[1]);
-            if off > 0.3 * b.core_radius_px {
-                seeds.push(Seed {
-                    centre_px: b.core_px,
-                    a_px: b.core_radius_px,
-                    b_px: b.core_radius_px,
-                    theta: 0.0,
-                    reach: UNSURE_SEED_REACH,
-                    kind: 1,
-                });
-            }
-            let off = (b.ringed_px[0] - b.centre_px[0]).hypot(b.ringed_px[1] - b.centre_px[1]);
-            let off_core = (b.ringed_px[0] - b.core_px[0]).hypot(b.ringed_px[1] - b.core_px[1]);
-            if b.ringed_light >= 0.5
-                && off > 0.3 * b.ringed_radius_px
-                && off_core > 0.3 * b.ringed_radius_px
-            {
-                seeds.push(Seed {
-                    centre_px: b.ringed_px,
-                    a_px: b.ringed_radius_px,
-                    b_px: b.ringed_radius_px,
-                    theta: 0.0,
-                    reach: UNSURE_SEED_REACH,
-                    kind: 2,
-                });
-            }
-            // A region that is cut by the border or elongated is mostly not
-            // a disc: its centroid lies off any disc in it, the point ringed
-            // by light is the likeliest disc centre, then the deepest point.
-            if !round[k] {
-                seeds.reverse();
-            }
+            let seeds = region_seeds(b, round[k], 0);
             for seed in &seeds {
                 // The same region at another threshold often gives nearly
                 // the same seed: its rays would find the same edges.
@@ -246,6 +271,12 @@ impl Detector {
                 }
             }
         }
+        // The third source, when neither gave a clear drogue: dark regions
+        // relative to their own neighbourhood (a disc that haze, vignetting
+        // or a glare's halo lifted above every global threshold).
+        if self.cfg.local_contrast_source && !verified.iter().any(|v| v.score >= accept) {
+            self.try_local_contrast(image, accept, &mut tried, &mut verified);
+        }
         tracing::debug!(
             regions = regions,
             seeds = tried.len(),
@@ -255,6 +286,84 @@ impl Detector {
         );
         self.blobs = blobs;
         verified
+    }
+
+    /// The local-contrast source ([`coarse::LocalContrast`]): in each of the
+    /// windows for the disc sizes searched, the regions darker than their
+    /// neighbourhood by [`LOCAL_DARK_SIGMAS`] whose size is a disc's of that
+    /// window; [`LOCAL_REGIONS`] of them (whole and round first, then
+    /// larger), their seeds tried as a dark region's are.
+    pub(super) fn try_local_contrast(
+        &mut self,
+        image: &GrayImage,
+        accept: f64,
+        tried: &mut Vec<Seed>,
+        verified: &mut Vec<Verified>,
+    ) {
+        let dec = &self.decimated;
+        let f = dec.factor as f64;
+        let sides = coarse::window_sides(
+            self.min_radius_px / f,
+            self.max_radius_px / f,
+            dec.width.min(dec.height),
+        );
+        if sides.is_empty() {
+            return;
+        }
+        self.local.prepare(dec);
+        let floor = LOCAL_FLOOR_CONTRAST * self.cfg.min_contrast_gray;
+        let level = coarse::normalised_level(-LOCAL_DARK_SIGMAS);
+        let mut blobs = std::mem::take(&mut self.blobs);
+        // Each window's disc-sized regions, described while its labels are
+        // the finder's, with whether they are whole and round.
+        let mut regions: Vec<(bool, Blob)> = Vec::new();
+        for &(side, r) in &sides {
+            self.local.normalise(side, floor);
+            let normalised = &self.local.normalised;
+            let min_area = ((std::f64::consts::PI * r * r) / 3.0).floor().max(2.0) as usize;
+            self.local_finder
+                .find_below(normalised, &[level], min_area, &mut blobs);
+            let (r_min, r_max) = (
+                LOCAL_MIN_RADIUS_SHARE * r * f,
+                LOCAL_MAX_RADIUS_SHARE * coarse::LOCAL_RADIUS_RATIO * r * f,
+            );
+            for b in &mut blobs {
+                let radius = (b.a_px * b.b_px).sqrt();
+                if !(r_min..=r_max).contains(&radius) {
+                    continue;
+                }
+                self.local_finder.describe_core(normalised, b);
+                let round = b.whole_and_round(normalised, self.cfg.min_axis_ratio);
+                regions.push((round, b.clone()));
+            }
+        }
+        self.blobs = blobs;
+        regions.sort_by(|x, y| y.0.cmp(&x.0).then(y.1.area.cmp(&x.1.area)));
+        let mut taken: Vec<&Blob> = Vec::new();
+        'regions: for (i, (round, b)) in regions.iter().enumerate() {
+            if taken.len() >= LOCAL_REGIONS {
+                break;
+            }
+            // The same dark patch in two windows: centres within the
+            // smaller one's minor radius.
+            if taken.iter().any(|t| {
+                let r = t.b_px.min(b.b_px);
+                (t.centre_px[0] - b.centre_px[0]).hypot(t.centre_px[1] - b.centre_px[1]) < r
+            }) {
+                continue;
+            }
+            taken.push(b);
+            for seed in region_seeds(b, *round, LOCAL_KIND_OFFSET) {
+                if tried.iter().any(|t| t.same_as(&seed)) {
+                    continue;
+                }
+                tried.push(seed.clone());
+                let index = 2000 + 3 * i as u64 + u64::from(seed.kind - LOCAL_KIND_OFFSET);
+                if self.try_seed(image, &seed, index, accept, verified) {
+                    break 'regions;
+                }
+            }
+        }
     }
 
     /// Verifies a seed (its random stream `index`), keeps it in `verified`

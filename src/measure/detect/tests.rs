@@ -673,3 +673,72 @@ fn a_faint_step_is_smoothed_as_much_as_stronger_noise() {
     assert_eq!(super::smoothing_half(3.0), 0);
     assert_eq!(super::smoothing_half_for_contrast(3.0, 30.0), 2);
 }
+
+/// The local-contrast source finds a hazed disc that no global threshold
+/// separates: most of the frame is a dark patch (the frame's darkest and
+/// median levels are both the patch's), and the drogue, lifted by haze,
+/// sits in the light part. Its regions give a seed that verifies as the
+/// disc, to within half a pixel.
+#[test]
+fn the_local_contrast_source_finds_a_disc_above_every_global_threshold() {
+    let (w, h) = (480, 360);
+    let cam = camera(w, h);
+    let disc = Ellipse::new(360.0, 120.0, 24.0, 20.0, 0.4);
+    let mut scene = Scene::new(disc);
+    (scene.disc_level, scene.canopy_level, scene.band_level) = (110.0, 180.0, 140.0);
+    scene.sky_level = 165.0;
+    scene.patches = vec![
+        ([0.0, 0.0, 250.0, 360.0], 20.0),
+        ([250.0, 240.0, 480.0, 360.0], 20.0),
+    ];
+    let img = scene.render(w, h, 2.0, 11);
+    let mut det = detector(&cam);
+    det.cfg.local_contrast_source = true;
+    det.measure_noise(&img, NOISE_ROW_STRIDE);
+    // The global thresholds see no dark region at the disc.
+    det.decimated.update(&img, det.cfg.decimation as usize);
+    let mut blobs = Vec::new();
+    det.finder.find(
+        &det.decimated,
+        &det.cfg.threshold_fractions,
+        2,
+        det.cfg.min_contrast_gray,
+        &mut blobs,
+    );
+    assert!(
+        !blobs
+            .iter()
+            .any(|b| (b.centre_px[0] - disc.cx).hypot(b.centre_px[1] - disc.cy) < disc.b),
+        "a global threshold separated the disc: the test shows nothing"
+    );
+    let (mut tried, mut verified) = (Vec::new(), Vec::new());
+    det.try_local_contrast(&img, det.cfg.accept_score, &mut tried, &mut verified);
+    assert!(tried.iter().all(|s| s.kind >= 5), "{tried:?}");
+    let best = verified
+        .iter()
+        .max_by(|x, y| x.score.total_cmp(&y.score))
+        .expect("a verified candidate");
+    let e = best.ellipse;
+    assert!(
+        (e.cx - disc.cx).hypot(e.cy - disc.cy) < 0.5
+            && (e.a - disc.a).abs() < 0.5
+            && (e.b - disc.b).abs() < 0.5,
+        "{e:?}"
+    );
+}
+
+/// The local-contrast source is off by default, and a detector with it on
+/// finds nothing on the drogue-free frames of the dark-shapes test.
+#[test]
+fn the_local_contrast_source_is_off_by_default_and_finds_no_dark_shape() {
+    assert!(!Config::embedded().detect.local_contrast_source);
+    let (w, h) = (400, 300);
+    let cam = camera(w, h);
+    let mut scene = Scene::new(Ellipse::new(0.0, 0.0, 0.0, 0.0, 0.0));
+    scene.with_canopy = false;
+    scene.rects = vec![[40.0, 40.0, 160.0, 80.0], [250.0, 150.0, 290.0, 190.0]];
+    let img = scene.render(w, h, 2.0, 4);
+    let mut det = detector(&cam);
+    det.cfg.local_contrast_source = true;
+    assert!(det.detect(&img, None).is_none());
+}

@@ -9,9 +9,13 @@
 //! each kept region's deepest point and its point best ringed by light.
 
 mod decimate;
+mod local;
 mod ridge;
 
 pub use decimate::Decimated;
+pub use local::{
+    LocalContrast, RADIUS_RATIO as LOCAL_RADIUS_RATIO, normalised_level, window_sides,
+};
 use ridge::RingStep;
 
 /// A dark connected region of the decimated image, summarised by its moments.
@@ -214,16 +218,33 @@ impl BlobFinder {
         if hi - lo < min_contrast {
             return;
         }
+        let levels: Vec<f64> = fractions.iter().map(|f| lo + f * (hi - lo)).collect();
+        self.find_below(img, &levels, min_area, out);
+    }
+
+    /// Dark regions (pixels at or below each of `levels`, gray) of at
+    /// least `min_area` decimated pixels; each blob's `level` is the index
+    /// of its level in `levels`.
+    pub fn find_below(
+        &mut self,
+        img: &Decimated,
+        levels: &[f64],
+        min_area: usize,
+        out: &mut Vec<Blob>,
+    ) {
+        out.clear();
+        if img.pixels.is_empty() {
+            return;
+        }
         // Highest threshold first: its regions hold those of the lower ones.
-        let mut order: Vec<usize> = (0..fractions.len()).collect();
-        order.sort_by(|&i, &j| fractions[j].total_cmp(&fractions[i]));
+        let mut order: Vec<usize> = (0..levels.len()).collect();
+        order.sort_by(|&i, &j| levels[j].total_cmp(&levels[i]));
         self.labels.resize_with(order.len(), Vec::new);
         self.label_widths.resize(order.len(), 0);
         self.runs.resize_with(order.len(), Vec::new);
         for (pass, &level) in order.iter().enumerate() {
-            let threshold = lo + fractions[level] * (hi - lo);
             let first = out.len();
-            self.label(img, threshold, min_area, pass, out);
+            self.label(img, levels[level], min_area, pass, out);
             if pass == 0 {
                 self.region_areas.clear();
                 self.region_areas.resize(self.moments.len(), 0);
