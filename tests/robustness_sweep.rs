@@ -28,6 +28,9 @@ struct Limit {
     /// Most false detections: any on drogue-free frames, and detections
     /// more than 5 % of the range or 10 degrees (the answer given) off.
     max_false: usize,
+    /// Most detections whose ellipse is not the disc's (a wrong pose
+    /// whatever the ambiguity; `sweep::WRONG_CENTRE_SHARE`).
+    max_wrong_ellipse: usize,
     /// Largest medians over the other detections: ellipse centre error
     /// (undistorted px), position error (% of range), normal error (deg).
     max_centre_px: Option<f64>,
@@ -39,6 +42,7 @@ const fn limit(
     level: &'static str,
     min_detected_pct: Option<u32>,
     max_false: usize,
+    max_wrong_ellipse: usize,
     max_centre_px: Option<f64>,
     max_position_pct: Option<f64>,
     max_normal_deg: Option<f64>,
@@ -47,6 +51,7 @@ const fn limit(
         level,
         min_detected_pct,
         max_false,
+        max_wrong_ellipse,
         max_centre_px,
         max_position_pct,
         max_normal_deg,
@@ -56,56 +61,62 @@ const fn limit(
 /// The limits, one row per level (seed `sweep::SEED`, `FRAMES` frames each),
 /// set from the detector of this commit. At 12-16 m the false detections are
 /// the unresolved answer's mirror half (`unresolved`: both solutions are
-/// reported, the first is scored).
+/// reported, the first is scored); so are those under 16-32 px of blur,
+/// whose ellipses are right (no wrong ellipse) since the long ramps are
+/// smoothed for their own rise (eighth session: 32 px 50 -> 60 % detected,
+/// its 4 wrong ellipses -> 0, the false count 4 -> 5 mirror halves; its
+/// position median is of one frame). `everything` gained two detections,
+/// one of them wrong (a disc cut by a glare streak and the probe, its left
+/// part taken for the disc with 63 % canopy evidence): counted here.
 #[rustfmt::skip]
 const LIMITS: &[Limit] = &[
-    //    level                                  detected %  false  centre px     position %    normal deg
-    limit("baseline", Some(100), 0, Some(0.02), Some(0.052), Some(0.13)),
-    limit("haze 0.2", Some(100), 0, Some(0.02), Some(0.019), Some(0.22)),
-    limit("haze 0.4", Some(100), 2, Some(0.022), Some(0.019), Some(0.15)),
-    limit("haze 0.6", Some(100), 2, Some(0.015), Some(0.024), Some(0.32)),
-    limit("glare streak 4 px wide", Some(100), 1, Some(0.02), Some(0.035), Some(0.16)),
-    limit("glare streak 12 px wide", Some(100), 1, Some(0.022), Some(0.044), Some(0.2)),
-    limit("glare streak 30 px wide", Some(60), 0, Some(0.029), Some(0.024), Some(1.36)),
-    limit("motion blur 4 px", Some(100), 0, Some(0.02), Some(0.059), Some(0.67)),
-    limit("motion blur 8 px", Some(100), 0, Some(0.027), Some(0.095), Some(0.98)),
-    limit("motion blur 16 px", Some(100), 6, Some(0.043), Some(0.443), Some(1.2)),
-    limit("motion blur 32 px", Some(50), 4, Some(0.863), Some(0.292), Some(6.36)),
-    limit("noise sigma 2", Some(100), 0, Some(0.02), Some(0.056), Some(0.31)),
-    limit("noise sigma 5", Some(100), 0, Some(0.013), Some(0.034), Some(0.16)),
-    limit("noise sigma 10", Some(100), 0, Some(0.038), Some(0.079), Some(0.25)),
-    limit("noise sigma 20", Some(100), 1, Some(0.079), Some(0.161), Some(0.55)),
-    limit("exposure gain 0.4", Some(100), 0, Some(0.022), Some(0.024), Some(0.13)),
-    limit("exposure gain 0.7", Some(100), 0, Some(0.02), Some(0.032), Some(0.19)),
-    limit("exposure gain 1.3", Some(100), 0, Some(0.019), Some(0.031), Some(0.15)),
-    limit("vignetting 0.4", Some(100), 0, Some(0.017), Some(0.027), Some(0.16)),
-    limit("vignetting 0.7", Some(100), 0, Some(0.019), Some(0.025), Some(0.15)),
-    limit("distortion k1 -0.12", Some(100), 1, Some(0.028), Some(0.041), Some(0.17)),
-    limit("distortion k1 -0.25", Some(100), 0, Some(0.016), Some(0.024), Some(0.13)),
-    limit("range 1 m", Some(100), 0, Some(0.01), Some(0.008), Some(0.07)),
-    limit("range 2 m", Some(100), 0, Some(0.011), Some(0.011), Some(0.1)),
-    limit("range 3 m", Some(100), 0, Some(0.016), Some(0.019), Some(0.13)),
-    limit("range 5 m", Some(100), 0, Some(0.022), Some(0.027), Some(0.17)),
-    limit("range 8 m", Some(100), 0, Some(0.029), Some(0.043), Some(0.29)),
-    limit("range 12 m", Some(100), 6, Some(0.034), Some(0.072), Some(0.47)),
-    limit("range 16 m", Some(100), 5, Some(0.027), Some(0.329), Some(0.76)),
-    limit("tilt 0 deg", Some(100), 0, Some(0.015), Some(0.024), Some(1.96)),
-    limit("tilt 15 deg", Some(100), 0, Some(0.017), Some(0.028), Some(0.13)),
-    limit("tilt 30 deg", Some(100), 0, Some(0.02), Some(0.02), Some(0.08)),
-    limit("tilt 45 deg", Some(100), 0, Some(0.019), Some(0.019), Some(0.08)),
-    limit("tilt 60 deg", Some(100), 0, Some(0.02), Some(0.034), Some(0.08)),
-    limit("tilt 75 deg", Some(100), 0, Some(0.028), Some(0.083), Some(0.08)),
-    limit("probe occlusion 0-10 %", Some(100), 0, Some(0.064), Some(0.031), Some(0.25)),
-    limit("probe occlusion 10-20 %", Some(100), 0, Some(0.031), Some(0.029), Some(0.17)),
-    limit("probe occlusion 20-30 %", Some(100), 0, Some(0.041), Some(0.044), Some(0.31)),
-    limit("probe occlusion 30-40 %", Some(100), 0, Some(0.04), Some(0.05), Some(0.32)),
-    limit("distractors 1", Some(100), 0, Some(0.013), Some(0.029), Some(0.17)),
-    limit("distractors 3", Some(100), 0, Some(0.017), Some(0.024), Some(0.17)),
-    limit("everything", Some(80), 2, Some(0.061), Some(0.14), Some(0.31)),
-    limit("no drogue: crescent", None, 0, None, None, None),
-    limit("no drogue: disc without canopy", None, 0, None, None, None),
-    limit("no drogue: ring without canopy", None, 0, None, None, None),
-    limit("no drogue: dark blobs, rectangles", None, 0, None, None, None),
+    //    level                                  detected %  false  wrong  centre px     position %    normal deg
+    limit("baseline", Some(100), 0, 0, Some(0.02), Some(0.052), Some(0.13)),
+    limit("haze 0.2", Some(100), 0, 0, Some(0.02), Some(0.019), Some(0.22)),
+    limit("haze 0.4", Some(100), 2, 0, Some(0.022), Some(0.019), Some(0.15)),
+    limit("haze 0.6", Some(100), 2, 0, Some(0.015), Some(0.024), Some(0.32)),
+    limit("glare streak 4 px wide", Some(100), 1, 0, Some(0.02), Some(0.035), Some(0.16)),
+    limit("glare streak 12 px wide", Some(100), 1, 0, Some(0.022), Some(0.044), Some(0.2)),
+    limit("glare streak 30 px wide", Some(60), 0, 0, Some(0.029), Some(0.024), Some(1.36)),
+    limit("motion blur 4 px", Some(100), 0, 0, Some(0.02), Some(0.059), Some(0.67)),
+    limit("motion blur 8 px", Some(100), 0, 0, Some(0.027), Some(0.095), Some(0.98)),
+    limit("motion blur 16 px", Some(100), 6, 0, Some(0.043), Some(0.443), Some(1.2)),
+    limit("motion blur 32 px", Some(60), 5, 0, Some(0.24), Some(0.78), Some(4.94)),
+    limit("noise sigma 2", Some(100), 0, 0, Some(0.02), Some(0.056), Some(0.31)),
+    limit("noise sigma 5", Some(100), 0, 0, Some(0.013), Some(0.034), Some(0.16)),
+    limit("noise sigma 10", Some(100), 0, 0, Some(0.038), Some(0.079), Some(0.25)),
+    limit("noise sigma 20", Some(100), 1, 0, Some(0.079), Some(0.161), Some(0.55)),
+    limit("exposure gain 0.4", Some(100), 0, 0, Some(0.022), Some(0.024), Some(0.13)),
+    limit("exposure gain 0.7", Some(100), 0, 0, Some(0.02), Some(0.032), Some(0.19)),
+    limit("exposure gain 1.3", Some(100), 0, 0, Some(0.019), Some(0.031), Some(0.15)),
+    limit("vignetting 0.4", Some(100), 0, 0, Some(0.017), Some(0.027), Some(0.16)),
+    limit("vignetting 0.7", Some(100), 0, 0, Some(0.019), Some(0.025), Some(0.15)),
+    limit("distortion k1 -0.12", Some(100), 1, 0, Some(0.028), Some(0.041), Some(0.17)),
+    limit("distortion k1 -0.25", Some(100), 0, 0, Some(0.016), Some(0.024), Some(0.13)),
+    limit("range 1 m", Some(100), 0, 0, Some(0.01), Some(0.008), Some(0.07)),
+    limit("range 2 m", Some(100), 0, 0, Some(0.011), Some(0.011), Some(0.1)),
+    limit("range 3 m", Some(100), 0, 0, Some(0.016), Some(0.019), Some(0.13)),
+    limit("range 5 m", Some(100), 0, 0, Some(0.022), Some(0.027), Some(0.17)),
+    limit("range 8 m", Some(100), 0, 0, Some(0.029), Some(0.043), Some(0.29)),
+    limit("range 12 m", Some(100), 6, 0, Some(0.034), Some(0.072), Some(0.47)),
+    limit("range 16 m", Some(100), 5, 0, Some(0.027), Some(0.329), Some(0.76)),
+    limit("tilt 0 deg", Some(100), 0, 0, Some(0.015), Some(0.024), Some(1.96)),
+    limit("tilt 15 deg", Some(100), 0, 0, Some(0.017), Some(0.028), Some(0.13)),
+    limit("tilt 30 deg", Some(100), 0, 0, Some(0.02), Some(0.02), Some(0.08)),
+    limit("tilt 45 deg", Some(100), 0, 0, Some(0.019), Some(0.019), Some(0.08)),
+    limit("tilt 60 deg", Some(100), 0, 0, Some(0.02), Some(0.034), Some(0.08)),
+    limit("tilt 75 deg", Some(100), 0, 0, Some(0.028), Some(0.083), Some(0.08)),
+    limit("probe occlusion 0-10 %", Some(100), 0, 0, Some(0.064), Some(0.031), Some(0.25)),
+    limit("probe occlusion 10-20 %", Some(100), 0, 0, Some(0.031), Some(0.029), Some(0.17)),
+    limit("probe occlusion 20-30 %", Some(100), 0, 0, Some(0.041), Some(0.044), Some(0.31)),
+    limit("probe occlusion 30-40 %", Some(100), 0, 0, Some(0.04), Some(0.05), Some(0.32)),
+    limit("distractors 1", Some(100), 0, 0, Some(0.013), Some(0.029), Some(0.17)),
+    limit("distractors 3", Some(100), 0, 0, Some(0.017), Some(0.024), Some(0.17)),
+    limit("everything", Some(90), 3, 1, Some(0.061), Some(0.14), Some(0.56)),
+    limit("no drogue: crescent", None, 0, 0, None, None, None),
+    limit("no drogue: disc without canopy", None, 0, 0, None, None, None),
+    limit("no drogue: ring without canopy", None, 0, 0, None, None, None),
+    limit("no drogue: dark blobs, rectangles", None, 0, 0, None, None, None),
 ];
 
 fn check(stats: &LevelStats, limit: &Limit) -> Vec<String> {
@@ -117,6 +128,12 @@ fn check(stats: &LevelStats, limit: &Limit) -> Vec<String> {
         if rate.is_nan() || rate + 1e-9 < f64::from(min) {
             failures.push(format!("{name}: detected {rate:.0} % < {min} %"));
         }
+    }
+    if stats.wrong_ellipse > limit.max_wrong_ellipse {
+        failures.push(format!(
+            "{name}: {} wrong ellipses > {}",
+            stats.wrong_ellipse, limit.max_wrong_ellipse
+        ));
     }
     if stats.false_detections > limit.max_false {
         failures.push(format!(

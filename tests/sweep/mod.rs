@@ -23,6 +23,12 @@ pub const GROSS_POSITION_REL: f64 = 0.05;
 /// A detection whose normal (the answer given) is off by more than this,
 /// degrees, is a false one.
 pub const GROSS_NORMAL_DEG: f64 = 10.0;
+/// A detection's ellipse is wrong (a wrong pose, whichever of its two
+/// solutions is taken) when its centre is more than this share of the true
+/// minor semi-axis off, or either axis is off by more than this share.
+pub const WRONG_ELLIPSE_SHARE: f64 = 0.1;
+/// ... its centre, in shares of the true minor semi-axis.
+pub const WRONG_CENTRE_SHARE: f64 = 0.2;
 
 /// What one level's frames gave.
 #[derive(Clone, Debug, Default)]
@@ -41,6 +47,11 @@ pub struct LevelStats {
     /// Of the gross errors, those on unresolved detections (the answer
     /// given is the mirror; the true one is reported as the alternative).
     pub false_unresolved: usize,
+    /// Detections whose ellipse is not the disc's ([`WRONG_CENTRE_SHARE`],
+    /// [`WRONG_ELLIPSE_SHARE`]): wrong whatever the ambiguity. A gross
+    /// error on an unresolved answer with the right ellipse is the mirror
+    /// solution given first, not counted here.
+    pub wrong_ellipse: usize,
     /// Per detection that is not gross: centre error (undistorted px),
     /// position error over range, normal error (degrees).
     pub centre_px: Vec<f64>,
@@ -162,15 +173,21 @@ fn score(stats: &mut LevelStats, m: &Measurement, truth: Option<&DrogueTruth>) {
         Disambiguation::Unresolved => stats.unresolved += 1,
         Disambiguation::Continuity => {}
     }
+    let e = &d.ellipse_px;
+    let te = &t.ellipse;
+    let centre_px = (e.cx - te.cx).hypot(e.cy - te.cy);
+    if centre_px > WRONG_CENTRE_SHARE * te.b
+        || (e.a / te.a - 1.0).abs() > WRONG_ELLIPSE_SHARE
+        || (e.b / te.b - 1.0).abs() > WRONG_ELLIPSE_SHARE
+    {
+        stats.wrong_ellipse += 1;
+    }
     if position_rel > GROSS_POSITION_REL || normal_deg > GROSS_NORMAL_DEG {
         stats.false_detections += 1;
         stats.false_unresolved += usize::from(d.disambiguation == Disambiguation::Unresolved);
         return;
     }
-    let e = &d.ellipse_px;
-    stats
-        .centre_px
-        .push((e.cx - t.ellipse.cx).hypot(e.cy - t.ellipse.cy));
+    stats.centre_px.push(centre_px);
     stats.position_rel.push(position_rel);
     stats.normal_deg.push(normal_deg);
 }
@@ -274,8 +291,8 @@ fn cell(x: f64, decimals: usize) -> String {
 /// The sweep as a markdown table (the README's).
 pub fn markdown(stats: &[LevelStats]) -> String {
     let mut out = String::from(
-        "| factor | setting | frames | detected | false (unresolved) | centre px | position % range | normal deg | rim right / wrong / unresolved |\n\
-         |---|---|---:|---:|---:|---:|---:|---:|---:|\n",
+        "| factor | setting | frames | detected | false (unresolved) | wrong ellipse | centre px | position % range | normal deg | rim right / wrong / unresolved |\n\
+         |---|---|---:|---:|---:|---:|---:|---:|---:|---:|\n",
     );
     for s in stats {
         let detected = if s.drogue {
@@ -294,12 +311,17 @@ pub fn markdown(stats: &[LevelStats]) -> String {
             s.false_detections.to_string()
         };
         out.push_str(&format!(
-            "| {} | {} | {} | {} | {} | {} | {} | {} | {} |\n",
+            "| {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |\n",
             s.factor,
             s.setting,
             s.frames,
             detected,
             false_detections,
+            if s.drogue {
+                s.wrong_ellipse.to_string()
+            } else {
+                "-".into()
+            },
             cell(s.centre_px_median(), 3),
             cell(s.position_pct_median(), 3),
             cell(s.normal_deg_median(), 2),

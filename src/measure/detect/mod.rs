@@ -153,6 +153,30 @@ fn smoothing_half(sigma: f64) -> usize {
 /// inside the ramp and its crossing moves along the blur.
 const SMOOTHED_NOISE_SHARE: f64 = 0.03;
 
+/// The longest smoothing of a blurred ramp, half-width in samples (+-4 px).
+const MAX_RAMP_SMOOTH_HALF: usize = 8;
+/// The rise along a ramp is found where it stays above a fifth of its peak
+/// ([`rim::strongest_rise`]); a dip below that inside the ramp is a noise
+/// excursion of 0.8 of the ramp's rise per pixel, made rare (3 sigma) when
+/// the noise of the rise (`sqrt 2` times the smoothed samples' noise) is at
+/// most this share of it.
+const RAMP_RISE_NOISE_SHARE: f64 = 0.8 / 3.0;
+
+/// The smoothing (half-width, samples) that keeps a ramp of `width_px` and
+/// `contrast` gray levels in noise `sigma` from ending inside itself: its
+/// rise per pixel is `contrast / width_px`, and the smoothed samples' noise
+/// must be `RAMP_RISE_NOISE_SHARE / sqrt 2` of that. A sharp step asks for
+/// none (the frame's noise smoothing covers it); at most
+/// [`MAX_RAMP_SMOOTH_HALF`].
+fn smoothing_half_for_ramp(sigma: f64, contrast: f64, width_px: f64) -> usize {
+    if !(contrast > 0.0 && width_px > 0.0 && sigma > 0.0) {
+        return 0;
+    }
+    let target = RAMP_RISE_NOISE_SHARE / std::f64::consts::SQRT_2 * contrast / width_px;
+    let m = (sigma / target).powi(2);
+    (((m - 1.0) / 2.0).max(0.0).round() as usize).min(MAX_RAMP_SMOOTH_HALF)
+}
+
 /// [`smoothing_half`] for a step of `contrast` gray levels: the kernel that
 /// brings the noise to [`SMOOTHED_NOISE_SHARE`] of the contrast.
 fn smoothing_half_for_contrast(sigma: f64, contrast: f64) -> usize {
@@ -317,7 +341,7 @@ impl Detector {
             raw_profile: Vec::new(),
             smooth_half: 0,
             noise_gray: 0.0,
-            smoothing_spread_px: (0..=MAX_SMOOTH_HALF)
+            smoothing_spread_px: (0..=MAX_SMOOTH_HALF.max(MAX_RAMP_SMOOTH_HALF))
                 .map(|h| rim::smoothing_spread_px(h, NARROW_STEP_PX))
                 .collect(),
         }

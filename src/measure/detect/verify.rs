@@ -5,7 +5,7 @@
 use super::search::Seed;
 use super::{
     Detector, Reject, SATURATED_GRAY, Verified, conic_fit, median, polar_radius,
-    polar_radius_local, ray_directions, rim, smoothing_half_for_contrast,
+    polar_radius_local, ray_directions, rim, smoothing_half_for_contrast, smoothing_half_for_ramp,
 };
 use crate::measure::ellipse::Ellipse;
 use image::GrayImage;
@@ -409,7 +409,44 @@ impl Detector {
                     self.raw_profile.clone_from(&self.profile);
                     rim::smooth(&mut self.profile, half, &mut self.scratch);
                 }
-                if let Some(mut e) = rim::strongest_rise(&self.profile, s0, 0.5, min_contrast) {
+                let mut half = half;
+                let mut found = rim::strongest_rise(&self.profile, s0, 0.5, min_contrast);
+                // A long blurred ramp rises little per sample: smoothed
+                // only for the frame's noise, its rise dips below the fade
+                // level inside the ramp, which then ends there and takes
+                // its levels inside it (the rim comes out too far out along
+                // the blur). Smoothed more for such a ramp, twice at most
+                // (the first width is short for the same reason). Not a step
+                // into saturated pixels: a glare streak's skirt is no blur.
+                for _ in 0..2 {
+                    let Some(e) = found else { break };
+                    let raw = if half > 0 {
+                        &self.raw_profile
+                    } else {
+                        &self.profile
+                    };
+                    if glare_on_light_side(raw, s0, 0.5, &e) {
+                        break;
+                    }
+                    let width = 2.0 * (e.light_s - e.s) - self.smoothing_spread_px[half];
+                    let ramp_half = smoothing_half_for_ramp(
+                        self.noise_gray,
+                        f64::from(e.light - e.dark),
+                        width,
+                    )
+                    .min(cap);
+                    if ramp_half <= half {
+                        break;
+                    }
+                    if half == 0 {
+                        self.raw_profile.clone_from(&self.profile);
+                    }
+                    self.profile.clone_from(&self.raw_profile);
+                    rim::smooth(&mut self.profile, ramp_half, &mut self.scratch);
+                    half = ramp_half;
+                    found = rim::strongest_rise(&self.profile, s0, 0.5, min_contrast);
+                }
+                if let Some(mut e) = found {
                     // A step into saturated pixels is most likely the skirt
                     // of a glare streak lying over the disc: its width says
                     // nothing of blur. (Its point stays: the robust fit
