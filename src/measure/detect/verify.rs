@@ -415,10 +415,13 @@ impl Detector {
                 // only for the frame's noise, its rise dips below the fade
                 // level inside the ramp, which then ends there and takes
                 // its levels inside it (the rim comes out too far out along
-                // the blur). Smoothed more for such a ramp, twice at most
-                // (the first width is short for the same reason). Not a step
-                // into saturated pixels: a glare streak's skirt is no blur.
-                for _ in 0..2 {
+                // the blur). On a pass whose window was widened for blur,
+                // a step is found again on a profile smoothed for its own
+                // rise, twice at most (the first width is short for the
+                // same reason). Not a step into saturated pixels: a glare
+                // streak's skirt is no blur.
+                let ramp_rounds = if widen > 1.0 { 2 } else { 0 };
+                for _ in 0..ramp_rounds {
                     let Some(e) = found else { break };
                     let raw = if half > 0 {
                         &self.raw_profile
