@@ -92,7 +92,8 @@ pub struct DetectConfig {
     /// Whether the local-contrast source runs when the dark regions and the
     /// edges gave no clear drogue (off by default: on the reference frames
     /// it finds no disc the other sources miss, and its seeds inside a disc
-    /// under the probe's tip verify the tip; see the README's "Detection").
+    /// under the probe's tip can verify the tip; see the README's
+    /// "Detection").
     #[serde(default)]
     pub local_contrast_source: bool,
 }

@@ -312,17 +312,20 @@ impl Detector {
         }
         self.local.prepare(dec);
         let floor = LOCAL_FLOOR_CONTRAST * self.cfg.min_contrast_gray;
-        let level = coarse::normalised_level(-LOCAL_DARK_SIGMAS);
         let mut blobs = std::mem::take(&mut self.blobs);
         // Each window's disc-sized regions, described while its labels are
         // the finder's, with whether they are whole and round.
         let mut regions: Vec<(bool, Blob)> = Vec::new();
         for &(side, r) in &sides {
-            self.local.normalise(side, floor);
-            let normalised = &self.local.normalised;
+            self.local.dark_mask(side, floor, LOCAL_DARK_SIGMAS);
+            let mask = &self.local.mask;
             let min_area = ((std::f64::consts::PI * r * r) / 3.0).floor().max(2.0) as usize;
-            self.local_finder
-                .find_below(normalised, &[level], min_area, &mut blobs);
+            self.local_finder.find_below(
+                mask,
+                &[coarse::LOCAL_MASK_THRESHOLD],
+                min_area,
+                &mut blobs,
+            );
             let (r_min, r_max) = (
                 LOCAL_MIN_RADIUS_SHARE * r * f,
                 LOCAL_MAX_RADIUS_SHARE * coarse::LOCAL_RADIUS_RATIO * r * f,
@@ -332,8 +335,8 @@ impl Detector {
                 if !(r_min..=r_max).contains(&radius) {
                     continue;
                 }
-                self.local_finder.describe_core(normalised, b);
-                let round = b.whole_and_round(normalised, self.cfg.min_axis_ratio);
+                self.local_finder.describe_core(mask, b);
+                let round = b.whole_and_round(mask, self.cfg.min_axis_ratio);
                 regions.push((round, b.clone()));
             }
         }

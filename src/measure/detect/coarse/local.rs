@@ -14,11 +14,12 @@
 
 use super::Decimated;
 
-/// Normalised levels are stored as gray levels `ZERO + SCALE * n`
-/// (clamped to 0..=255): the labelling of the coarse search then runs on
-/// them unchanged. `n` from -4 to +4 standard deviations fits.
-const ZERO: f64 = 128.0;
-const SCALE: f64 = 32.0;
+/// Levels of the dark mask ([`LocalContrast::dark_mask`]): the labelling
+/// of the coarse search runs on it unchanged, with [`MASK_THRESHOLD`].
+const MASK_DARK: u8 = 0;
+const MASK_LIGHT: u8 = 255;
+/// A mask pixel at or below this level is dark.
+pub const MASK_THRESHOLD: f64 = 127.0;
 
 /// The window's side over the radius of the smallest disc it is for. The
 /// windows are [`RADIUS_RATIO`] apart, so the largest disc of a window
@@ -28,12 +29,6 @@ const SCALE: f64 = 32.0;
 const SIDE_RADII: f64 = 9.0;
 /// Disc radii covered by one window: from `r` to `RADIUS_RATIO r`.
 pub const RADIUS_RATIO: f64 = 2.0;
-
-/// The gray level that a pixel `n` standard deviations from its
-/// neighbourhood's mean is stored as.
-pub fn normalised_level(n: f64) -> f64 {
-    (ZERO + SCALE * n).clamp(0.0, 255.0)
-}
 
 /// The odd window sides (decimated pixels) for disc radii from
 /// `min_radius` to `max_radius` (decimated pixels), smallest first, each
@@ -63,52 +58,95 @@ pub struct LocalContrast {
     squares: Vec<u64>,
     /// The prepared frame's levels.
     levels: Vec<u8>,
-    /// The normalised frame (same size and factor as the input).
-    pub normalised: Decimated,
+    /// The dark mask (same size and factor as the input).
+    pub mask: Decimated,
 }
 
 impl LocalContrast {
-    /// Takes the frame the next [`normalise`](Self::normalise) calls work
+    /// Takes the frame the next [`dark_mask`](Self::dark_mask) calls work
     /// on (its summed-area tables, once for every window).
     pub fn prepare(&mut self, img: &Decimated) {
         self.tables(img);
         self.levels.clone_from(&img.pixels);
-        self.normalised.width = img.width;
-        self.normalised.height = img.height;
-        self.normalised.factor = img.factor;
+        self.mask.width = img.width;
+        self.mask.height = img.height;
+        self.mask.factor = img.factor;
     }
 
-    /// Normalises the prepared frame over windows of `side` x `side`
-    /// pixels (clipped at the frame's border), with `floor_gray` added to
-    /// the standard deviation: a flat patch of sky, whose deviation is its
-    /// noise, does not make every faint mottle stand out.
+    /// The pixels of the prepared frame that lie `sigmas` standard
+    /// deviations or more below the mean of their `side` x `side`
+    /// neighbourhood (clipped at the frame's border), with `floor_gray`
+    /// added to the deviation: `(p - mean) / (std + floor) <= -sigmas`.
+    /// The floor keeps a flat patch of sky, whose deviation is its noise,
+    /// from making every faint mottle stand out. Written to `mask` as
+    /// [`MASK_DARK`] and [`MASK_LIGHT`]; tested as `mean - p - sigmas floor
+    /// >= sigmas std` on squares, with no root or division per pixel.
     #[inline(never)]
-    pub fn normalise(&mut self, side: usize, floor_gray: f64) {
-        let (w, h) = (self.normalised.width, self.normalised.height);
-        self.normalised.pixels.clear();
-        self.normalised.pixels.resize(w * h, 0);
+    pub fn dark_mask(&mut self, side: usize, floor_gray: f64, sigmas: f64) {
+        let (w, h) = (self.mask.width, self.mask.height);
+        self.mask.pixels.clear();
+        self.mask.pixels.resize(w * h, MASK_LIGHT);
         if w == 0 || h == 0 || self.levels.len() != w * h {
             return;
         }
         let stride = w + 1;
         let half = side / 2;
-        let floor = floor_gray.max(f64::EPSILON);
+        let offset = sigmas * floor_gray.max(0.0);
+        let sigmas_sq = sigmas * sigmas;
+        // Each row's window column sums (the tables' rows y1 less y0).
+        let mut columns = vec![0.0f64; stride];
+        let mut columns_sq = vec![0.0f64; stride];
+        // 1 / the window's pixel count, per column span (the rows' span is
+        // the same along a row).
+        let mut inverse_width = vec![0.0f64; w];
+        for (x, inv) in inverse_width.iter_mut().enumerate() {
+            let (x0, x1) = (x.saturating_sub(half), (x + half + 1).min(w));
+            *inv = 1.0 / (x1 - x0) as f64;
+        }
         for y in 0..h {
             let (y0, y1) = (y.saturating_sub(half), (y + half + 1).min(h));
-            for x in 0..w {
+            let (top, bottom) = (y0 * stride, y1 * stride);
+            for x in 0..stride {
+                columns[x] = f64::from(self.sums[bottom + x] - self.sums[top + x]);
+                columns_sq[x] = (self.squares[bottom + x] - self.squares[top + x]) as f64;
+            }
+            let inverse_height = 1.0 / (y1 - y0) as f64;
+            let row = &self.levels[y * w..(y + 1) * w];
+            let out = &mut self.mask.pixels[y * w..(y + 1) * w];
+            let dark = |x0: usize, x1: usize, inverse_n: f64, p: u8| {
+                let mean = (columns[x1] - columns[x0]) * inverse_n;
+                let variance =
+                    ((columns_sq[x1] - columns_sq[x0]) * inverse_n - mean * mean).max(0.0);
+                let d = mean - f64::from(p) - offset;
+                d >= 0.0 && d * d >= sigmas_sq * variance
+            };
+            // The frame's left and right borders clip the window; between
+            // them (`half..w - half`) it is whole, and the loop has no
+            // clipping to do.
+            let (inner_start, inner_end) = (half.min(w), w.saturating_sub(half).max(half.min(w)));
+            for x in (0..inner_start).chain(inner_end..w) {
                 let (x0, x1) = (x.saturating_sub(half), (x + half + 1).min(w));
-                // The window's corners in the tables.
-                let (a, b) = (y1 * stride + x1, y0 * stride + x1);
-                let (c, d) = (y1 * stride + x0, y0 * stride + x0);
-                let n = ((x1 - x0) * (y1 - y0)) as f64;
-                let sum = f64::from(self.sums[a] + self.sums[d] - self.sums[b] - self.sums[c]);
-                let sq =
-                    (self.squares[a] + self.squares[d] - self.squares[b] - self.squares[c]) as f64;
-                let mean = sum / n;
-                let std = (sq / n - mean * mean).max(0.0).sqrt();
-                let p = f64::from(self.levels[y * w + x]);
-                self.normalised.pixels[y * w + x] =
-                    normalised_level((p - mean) / (std + floor)).round() as u8;
+                if dark(x0, x1, inverse_width[x] * inverse_height, row[x]) {
+                    out[x] = MASK_DARK;
+                }
+            }
+            let inverse_n = inverse_height / (2 * half + 1) as f64;
+            // Written whatever the answer: no branch, so the loop vectorises.
+            let (lo, hi) = (&columns[..], &columns[2 * half + 1..]);
+            let (lo_sq, hi_sq) = (&columns_sq[..], &columns_sq[2 * half + 1..]);
+            let span = inner_start..inner_end;
+            for ((((o, &p), (&a, &b)), &a_sq), &b_sq) in out[span.clone()]
+                .iter_mut()
+                .zip(&row[span.clone()])
+                .zip(lo.iter().zip(hi))
+                .zip(lo_sq)
+                .zip(hi_sq)
+            {
+                let mean = (b - a) * inverse_n;
+                let variance = ((b_sq - a_sq) * inverse_n - mean * mean).max(0.0);
+                let d = mean - f64::from(p) - offset;
+                let dark = d >= 0.0 && d * d >= sigmas_sq * variance;
+                *o = if dark { MASK_DARK } else { MASK_LIGHT };
             }
         }
     }
@@ -152,31 +190,40 @@ mod tests {
     #[test]
     fn matches_a_direct_window_mean_and_deviation() {
         // A pseudo-random frame: every pixel against its window's mean and
-        // standard deviation computed directly.
+        // standard deviation computed directly, `(p - mean) / (std +
+        // floor) <= -sigmas`.
         let img = decimated(23, 17, |x, y| ((x * 37 + y * 91 + x * y * 13) % 251) as u8);
         let mut lc = LocalContrast::default();
-        let (side, floor) = (7, 2.0);
         lc.prepare(&img);
-        lc.normalise(side, floor);
-        for y in 0..img.height {
-            for x in 0..img.width {
-                let mut values = Vec::new();
-                for v in y.saturating_sub(3)..(y + 4).min(img.height) {
-                    for u in x.saturating_sub(3)..(x + 4).min(img.width) {
-                        values.push(f64::from(img.pixels[v * img.width + u]));
+        for (side, floor, sigmas) in [(7, 2.0, 1.0), (5, 0.0, 0.5), (11, 6.0, 1.5)] {
+            lc.dark_mask(side, floor, sigmas);
+            let half = side / 2;
+            let mut dark = 0;
+            for y in 0..img.height {
+                for x in 0..img.width {
+                    let mut values = Vec::new();
+                    for v in y.saturating_sub(half)..(y + half + 1).min(img.height) {
+                        for u in x.saturating_sub(half)..(x + half + 1).min(img.width) {
+                            values.push(f64::from(img.pixels[v * img.width + u]));
+                        }
+                    }
+                    let n = values.len() as f64;
+                    let mean = values.iter().sum::<f64>() / n;
+                    let std = (values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / n).sqrt();
+                    let p = f64::from(img.pixels[y * img.width + x]);
+                    let z = (p - mean) / (std + floor);
+                    let got = lc.mask.pixels[y * img.width + x] == MASK_DARK;
+                    dark += usize::from(got);
+                    // Rounding may decide a pixel exactly at the level.
+                    if (z + sigmas).abs() > 1e-9 {
+                        assert_eq!(got, z <= -sigmas, "({x}, {y}) side {side}: z {z}");
                     }
                 }
-                let n = values.len() as f64;
-                let mean = values.iter().sum::<f64>() / n;
-                let std = (values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / n).sqrt();
-                let p = f64::from(img.pixels[y * img.width + x]);
-                let expected = normalised_level((p - mean) / (std + floor)).round();
-                assert_eq!(
-                    f64::from(lc.normalised.pixels[y * img.width + x]),
-                    expected,
-                    "({x}, {y})"
-                );
             }
+            assert!(
+                dark > 0,
+                "side {side}: no dark pixel, the test shows nothing"
+            );
         }
     }
 
@@ -186,7 +233,8 @@ mod tests {
         // part of the frame and one in a light part (a strong vignetting or
         // haze gradient): a global threshold between the frame's darkest
         // and median levels takes the whole dark half with the first disc
-        // and misses the second; normalised, both are equally dark.
+        // and misses the second; against their neighbourhoods both are dark
+        // and nothing else is.
         let img = decimated(80, 40, |x, y| {
             let base = if x < 40 { 70.0 } else { 200.0 };
             let disc = |cx: f64| (x as f64 - cx).hypot(y as f64 - 20.0) <= 4.0;
@@ -194,15 +242,15 @@ mod tests {
         });
         let mut lc = LocalContrast::default();
         lc.prepare(&img);
-        lc.normalise(19, 2.0);
-        let at = |x: usize, y: usize| lc.normalised.pixels[y * 80 + x];
-        let dark = normalised_level(-1.5) as u8;
-        assert!(at(20, 20) <= dark && at(60, 20) <= dark);
-        assert_eq!(at(20, 20), at(60, 20));
+        lc.dark_mask(19, 2.0, 1.5);
+        let at = |x: usize, y: usize| lc.mask.pixels[y * 80 + x];
+        assert_eq!((at(20, 20), at(60, 20)), (MASK_DARK, MASK_DARK));
         // Away from the discs (and from the step between the halves) the
         // frame is at its neighbourhood's mean.
-        assert_eq!(at(5, 5), normalised_level(0.0) as u8);
-        assert_eq!(at(75, 35), normalised_level(0.0) as u8);
+        assert_eq!((at(5, 5), at(75, 35)), (MASK_LIGHT, MASK_LIGHT));
+        // The dark pixels are the two discs' (radius 4: 49 pixels each).
+        let dark: usize = lc.mask.pixels.iter().map(|&p| usize::from(p == MASK_DARK)).sum();
+        assert!((80..=98).contains(&dark), "{dark} dark pixels");
     }
 
     #[test]

@@ -14,7 +14,8 @@ mod ridge;
 
 pub use decimate::Decimated;
 pub use local::{
-    LocalContrast, RADIUS_RATIO as LOCAL_RADIUS_RATIO, normalised_level, window_sides,
+    LocalContrast, MASK_THRESHOLD as LOCAL_MASK_THRESHOLD, RADIUS_RATIO as LOCAL_RADIUS_RATIO,
+    window_sides,
 };
 use ridge::RingStep;
 
