@@ -1,7 +1,10 @@
 //! Detection of the drogue's dark inner circle: sub-pixel rim edge points.
 //!
 //! 1. `coarse`: dark connected regions of a decimated frame, at a few
-//!    thresholds, give candidate centres and sizes (cheap, whole frame).
+//!    thresholds, give candidate centres and sizes (cheap, whole frame);
+//!    `edges`, gradient voting, gives more when they find no clear drogue
+//!    (and, opt-in, `coarse::local`: regions dark against their own
+//!    neighbourhood).
 //! 2. `rim`: rays from a candidate centre at full resolution give one
 //!    sub-pixel dark-to-light edge each; a quick robust ellipse fit
 //!    (`conic_fit`) of them moves the centre onto the disc, and a second,
@@ -255,8 +258,8 @@ pub struct Detector {
     finder: BlobFinder,
     blobs: Vec<Blob>,
     voter: edges::EdgeVoter,
-    /// The local-contrast source's normalised frame and its labelling
-    /// (apart from `finder`'s, whose label images a frame reuses).
+    /// The local-contrast source's dark masks and their labelling (apart
+    /// from `finder`'s, whose label images a frame reuses).
     local: LocalContrast,
     local_finder: BlobFinder,
     profile: Vec<f32>,

@@ -249,7 +249,12 @@ mod tests {
         // frame is at its neighbourhood's mean.
         assert_eq!((at(5, 5), at(75, 35)), (MASK_LIGHT, MASK_LIGHT));
         // The dark pixels are the two discs' (radius 4: 49 pixels each).
-        let dark: usize = lc.mask.pixels.iter().map(|&p| usize::from(p == MASK_DARK)).sum();
+        let dark: usize = lc
+            .mask
+            .pixels
+            .iter()
+            .map(|&p| usize::from(p == MASK_DARK))
+            .sum();
         assert!((80..=98).contains(&dark), "{dark} dark pixels");
     }
 
