@@ -24,10 +24,10 @@ pub const GROSS_POSITION_REL: f64 = 0.05;
 /// degrees, is a false one.
 pub const GROSS_NORMAL_DEG: f64 = 10.0;
 /// A detection's ellipse is wrong (a wrong pose, whichever of its two
-/// solutions is taken) when its centre is more than this share of the true
-/// minor semi-axis off, or either axis is off by more than this share.
+/// solutions is taken) when either axis is off by more than this share of
+/// the true one...
 pub const WRONG_ELLIPSE_SHARE: f64 = 0.1;
-/// ... its centre, in shares of the true minor semi-axis.
+/// ... or its centre by more than this share of the true minor semi-axis.
 pub const WRONG_CENTRE_SHARE: f64 = 0.2;
 
 /// What one level's frames gave.

@@ -54,7 +54,7 @@ pub fn window_sides(min_radius: f64, max_radius: f64, limit: usize) -> Vec<(usiz
 pub struct LocalContrast {
     /// Summed-area tables of the levels and their squares, one row and
     /// column of zeros first.
-    sums: Vec<u32>,
+    sums: Vec<u64>,
     squares: Vec<u64>,
     /// The prepared frame's levels.
     levels: Vec<u8>,
@@ -107,7 +107,7 @@ impl LocalContrast {
             let (y0, y1) = (y.saturating_sub(half), (y + half + 1).min(h));
             let (top, bottom) = (y0 * stride, y1 * stride);
             for x in 0..stride {
-                columns[x] = f64::from(self.sums[bottom + x] - self.sums[top + x]);
+                columns[x] = (self.sums[bottom + x] - self.sums[top + x]) as f64;
                 columns_sq[x] = (self.squares[bottom + x] - self.squares[top + x]) as f64;
             }
             let inverse_height = 1.0 / (y1 - y0) as f64;
@@ -151,8 +151,9 @@ impl LocalContrast {
         }
     }
 
-    /// The summed-area tables of `img` (exact: at most 255^2 per pixel in
-    /// u64, 255 per pixel in u32 for up to 16 million pixels).
+    /// The summed-area tables of `img`, exact in u64 for any frame the
+    /// camera file allows (a 16384 x 16384 frame at `decimation = 1` sums
+    /// to 6.8e10 levels and 1.7e13 squares; u32 would wrap).
     fn tables(&mut self, img: &Decimated) {
         let (w, h) = (img.width, img.height);
         let stride = w + 1;
@@ -161,11 +162,11 @@ impl LocalContrast {
         self.squares.clear();
         self.squares.resize(stride * (h + 1), 0);
         for y in 0..h {
-            let (mut row, mut row_sq) = (0u32, 0u64);
+            let (mut row, mut row_sq) = (0u64, 0u64);
             for x in 0..w {
-                let p = u32::from(img.pixels[y * w + x]);
+                let p = u64::from(img.pixels[y * w + x]);
                 row += p;
-                row_sq += u64::from(p * p);
+                row_sq += p * p;
                 let i = (y + 1) * stride + x + 1;
                 self.sums[i] = self.sums[i - stride] + row;
                 self.squares[i] = self.squares[i - stride] + row_sq;
