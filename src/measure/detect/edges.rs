@@ -24,6 +24,24 @@ const MIN_GRADIENT_SHARE: f64 = 0.5;
 const MAX_VOTE_RADIUS: usize = 64;
 /// Peaks closer than this (decimated pixels) are one peak.
 const PEAK_SEPARATION: i64 = 4;
+/// Two circles with centres within [`PEAK_SEPARATION`] are two when their
+/// radii differ by more than this share of the smaller and more than
+/// [`DISTINCT_RADIUS_PX`] decimated pixels: a radius is measured to a pixel
+/// or two.
+const DISTINCT_RADIUS_SHARE: f64 = 0.5;
+const DISTINCT_RADIUS_PX: f64 = 2.0;
+/// Edges within this distance (decimated pixels) of a circle's radius are
+/// its rim: the three one-pixel bins [`EdgeVoter::radius_at`] sums.
+const RIM_BINS_PX: f64 = 1.5;
+/// A nested circle's centre lies within this many decimated pixels of the
+/// smaller circle's it surrounds ([`EdgeVoter::nested`]): twice
+/// [`PEAK_SEPARATION`] (the probe's tip lies anywhere inside the disc, and
+/// its votes bury the disc's centre up to about that far).
+const NESTED_REACH: f64 = 2.0 * PEAK_SEPARATION as f64;
+/// Cells looked at per nested circle asked for: the others are weaker
+/// than a circle's worth of votes more often than not, and each costs a
+/// pass over the edges.
+const NESTED_CELLS_PER_CIRCLE: usize = 4;
 /// A peak needs votes from at least this share of its rim's circumference
 /// (decimated pixels).
 const MIN_RIM_SHARE: f64 = 0.35;
@@ -41,6 +59,26 @@ pub struct EdgeCircle {
     pub strength: f64,
 }
 
+/// A circle in the votes, decimated pixels: its centre and radius.
+#[derive(Clone, Copy, Debug)]
+struct Peak {
+    centre: [f64; 2],
+    radius: f64,
+}
+
+impl Peak {
+    /// Whether `other` is this circle found again: centres within
+    /// [`PEAK_SEPARATION`] of each other and radii within [`DISTINCT_RADIUS_PX`] or
+    /// [`DISTINCT_RADIUS_SHARE`] of the smaller.
+    fn one_circle_with(&self, other: &Peak) -> bool {
+        let (small, large) = (self.radius.min(other.radius), self.radius.max(other.radius));
+        let apart = (self.centre[0] - other.centre[0]).hypot(self.centre[1] - other.centre[1]);
+        apart <= PEAK_SEPARATION as f64
+            && (large - small <= DISTINCT_RADIUS_PX
+                || large - small <= DISTINCT_RADIUS_SHARE * small)
+    }
+}
+
 /// Scratch for the voting, reused between frames.
 #[derive(Clone, Default)]
 pub struct EdgeVoter {
@@ -51,6 +89,10 @@ pub struct EdgeVoter {
     /// Row length of `votes`.
     stride: usize,
     histogram: Vec<u32>,
+    /// The radii voted for by the last [`EdgeVoter::find`], decimated pixels.
+    radii: (usize, usize),
+    /// The decimation factor of the last [`EdgeVoter::find`].
+    factor: f64,
 }
 
 impl EdgeVoter {
@@ -73,12 +115,14 @@ impl EdgeVoter {
         let r_max = ((max_radius_px / f).ceil() as usize).clamp(r_min, MAX_VOTE_RADIUS);
         self.collect_edges(img, MIN_GRADIENT_SHARE * min_contrast_gray);
         self.vote(w, h, r_min, r_max);
+        self.radii = (r_min, r_max);
+        self.factor = f;
         tracing::trace!(edges = self.edges.len(), r_min, r_max, "edge pixels voting");
         let peaks = self.peaks(w, h, r_min, max_peaks);
         peaks
             .into_iter()
             .filter_map(|(x, y, votes)| {
-                let r = self.radius_at([x, y], r_min, r_max)?;
+                let r = self.radius_at([x as f64, y as f64], r_min, r_max)?;
                 let circumference = std::f64::consts::TAU * r;
                 let strength = f64::from(votes) / circumference;
                 (strength >= MIN_RIM_SHARE).then(|| EdgeCircle {
@@ -88,6 +132,148 @@ impl EdgeVoter {
                 })
             })
             .collect()
+    }
+
+    /// Up to `max_more` further circles of the last [`Self::find`]'s votes,
+    /// strongest first, each around one of `found` (its circles), once
+    /// their rims are taken out with their votes. A circle nearly
+    /// concentric with a stronger one (the disc around the probe's tip,
+    /// whose votes run on through its centre) makes no peak of its own
+    /// beside it; with the stronger rim's votes gone, it does. The circles
+    /// are the strongest local maxima of the votes (summed over 3x3) within
+    /// [`NESTED_REACH`] of a circle found, larger than it and not a circle
+    /// already found.
+    pub fn nested(
+        &mut self,
+        img: &Decimated,
+        found: &[EdgeCircle],
+        max_more: usize,
+    ) -> Vec<EdgeCircle> {
+        let (w, h) = (img.width, img.height);
+        if w < 3 || h < 3 || max_more == 0 || self.votes.is_empty() {
+            return Vec::new();
+        }
+        let (r_min, r_max) = self.radii;
+        let f = self.factor;
+        let mut known: Vec<Peak> = found
+            .iter()
+            .map(|c| Peak {
+                centre: [
+                    (c.centre_px[0] + 0.5) / f - 0.5,
+                    (c.centre_px[1] + 0.5) / f - 0.5,
+                ],
+                radius: c.radius_px / f,
+            })
+            .collect();
+        for p in known.clone() {
+            self.take_rim(p.centre, p.radius, r_min, r_max);
+        }
+        let floor = (MIN_RIM_SHARE * std::f64::consts::TAU * r_min as f64).ceil() as u32;
+        let found_here = known.clone();
+        // Only near the circles found: a nested circle's centre is within
+        // [`NESTED_REACH`] of the smaller one's.
+        let mut cells: Vec<(usize, usize, u32)> = Vec::new();
+        for k in &found_here {
+            for cell in self.maxima_near(k.centre, w, h, floor) {
+                if !cells.contains(&cell) {
+                    cells.push(cell);
+                }
+            }
+        }
+        // Strongest first, the earlier in raster order among equals.
+        cells.sort_by_key(|p| (std::cmp::Reverse(p.2), p.1, p.0));
+        let mut more = Vec::with_capacity(max_more);
+        // A radius costs a pass over the edges: the strongest few cells
+        // are looked at.
+        for (x, y, votes) in cells.into_iter().take(NESTED_CELLS_PER_CIRCLE * max_more) {
+            if more.len() == max_more {
+                break;
+            }
+            let centre = [x as f64, y as f64];
+            let Some(radius) = self.radius_at(centre, r_min, r_max) else {
+                continue;
+            };
+            let peak = Peak { centre, radius };
+            // Around a smaller circle found (the disc around the tip), and
+            // not a circle known already.
+            let surrounds = |k: &Peak| {
+                (k.centre[0] - x as f64).hypot(k.centre[1] - y as f64) <= NESTED_REACH
+                    && radius > k.radius
+                    && !k.one_circle_with(&peak)
+            };
+            if !found_here.iter().any(surrounds) || known.iter().any(|k| k.one_circle_with(&peak)) {
+                continue;
+            }
+            known.push(peak);
+            let strength = f64::from(votes) / (std::f64::consts::TAU * radius);
+            if strength >= MIN_RIM_SHARE {
+                more.push(EdgeCircle {
+                    centre_px: img.to_full(x as f64, y as f64),
+                    radius_px: radius * f,
+                    strength,
+                });
+            }
+        }
+        more
+    }
+
+    /// The local maxima (x, y, sum) of the votes summed over 3x3, of at
+    /// least `floor`, within [`NESTED_REACH`] of `c` (decimated pixels; not
+    /// on the frame's border); plateaus keep every cell.
+    fn maxima_near(&self, c: [f64; 2], w: usize, h: usize, floor: u32) -> Vec<(usize, usize, u32)> {
+        let reach = NESTED_REACH.ceil() as i64;
+        let clamp = |v: f64, hi: usize| (v.round() as i64).clamp(1, hi as i64 - 2) as usize;
+        let (x0, x1) = (clamp(c[0] - reach as f64, w), clamp(c[0] + reach as f64, w));
+        let (y0, y1) = (clamp(c[1] - reach as f64, h), clamp(c[1] + reach as f64, h));
+        // The 3x3 sums of the window and a cell around it (0 off the frame's
+        // inside), in a grid `gw` wide.
+        let gw = x1 - x0 + 3;
+        let mut sums = vec![0u32; gw * (y1 - y0 + 3)];
+        for y in y0.saturating_sub(1).max(1)..=(y1 + 1).min(h - 2) {
+            for x in x0.saturating_sub(1).max(1)..=(x1 + 1).min(w - 2) {
+                let mut sum = 0u32;
+                for yy in y - 1..=y + 1 {
+                    let row = &self.votes[(yy + 1) * self.stride + x..][..3];
+                    sum += row.iter().map(|&v| u32::from(v)).sum::<u32>();
+                }
+                sums[(y + 1 - y0) * gw + (x + 1 - x0)] = sum;
+            }
+        }
+        let mut found = Vec::new();
+        for y in y0..=y1 {
+            for x in x0..=x1 {
+                let at = |dx: usize, dy: usize| sums[(y + dy - y0) * gw + (x + dx - x0)];
+                let s = at(1, 1);
+                let around = [
+                    at(0, 0),
+                    at(1, 0),
+                    at(2, 0),
+                    at(0, 1),
+                    at(2, 1),
+                    at(0, 2),
+                    at(1, 2),
+                    at(2, 2),
+                ];
+                if s >= floor && around.iter().all(|&a| a <= s) {
+                    found.push((x, y, s));
+                }
+            }
+        }
+        found
+    }
+
+    /// Takes the edges of the rim of radius `r` about `c` ([`on_rim`]) out,
+    /// with their votes.
+    fn take_rim(&mut self, c: [f64; 2], r: f64, r_min: usize, r_max: usize) {
+        let mut edges = std::mem::take(&mut self.edges);
+        edges.retain(|&edge| {
+            let rim = on_rim(c, r, edge);
+            if rim {
+                cast_votes(&mut self.votes, self.stride, edge, r_min, r_max, false);
+            }
+            !rim
+        });
+        self.edges = edges;
     }
 
     /// Edge pixels: Sobel gradient (gray levels per pixel) of at least
@@ -134,24 +320,8 @@ impl EdgeVoter {
         self.stride = stride;
         self.votes.clear();
         self.votes.resize(stride * (h + r_max + 2), 0);
-        // The padded cell of a coordinate: rounding half away from zero, as
-        // `f32::round`, without its libm call; at or below -0.5 the
-        // padding's first cell.
-        let cell = |v: f32| {
-            let t = v + 0.5;
-            if t > 0.0 { t as i32 as usize + 1 } else { 0 }
-        };
-        for &([x, y], [gx, gy]) in &self.edges {
-            let (x, y) = (x as f32, y as f32);
-            // The radius counted in f32 (exact for these small integers):
-            // no integer-to-float conversion per vote.
-            let mut r = r_min as f32;
-            for _ in r_min..=r_max {
-                let i = cell(y - gy * r) * stride + cell(x - gx * r);
-                let v = &mut self.votes[i];
-                *v = v.saturating_add(1);
-                r += 1.0;
-            }
+        for &edge in &self.edges {
+            cast_votes(&mut self.votes, stride, edge, r_min, r_max, true);
         }
     }
 
@@ -230,14 +400,13 @@ impl EdgeVoter {
 
     /// The commonest distance (decimated pixels) from `c` of the edges
     /// whose gradient points away from it, within r_min..=r_max.
-    fn radius_at(&mut self, c: [usize; 2], r_min: usize, r_max: usize) -> Option<f64> {
+    fn radius_at(&mut self, c: [f64; 2], r_min: usize, r_max: usize) -> Option<f64> {
         self.histogram.clear();
         self.histogram.resize(r_max + 2, 0);
-        let (cx, cy) = (c[0] as f64, c[1] as f64);
+        let [cx, cy] = c;
         for &([x, y], [gx, gy]) in &self.edges {
             let (dx, dy) = (f64::from(x) - cx, f64::from(y) - cy);
-            // Integer offsets: exact squares, and the square root is
-            // correctly rounded (no libm call, as `hypot` makes).
+            // No libm call, as `hypot` makes: the offsets are small.
             let d = (dx * dx + dy * dy).sqrt();
             if d < r_min as f64 - 0.5 || d > r_max as f64 + 0.5 {
                 continue;
@@ -259,6 +428,48 @@ impl EdgeVoter {
             .filter(|&r| self.histogram[r] > 0 || density(r) > 0.0)
             .map(|r| r as f64)
     }
+}
+
+/// One edge's votes for the centres `r_min..=r_max` pixels against its
+/// gradient, in the padded frame of [`EdgeVoter::vote`]: added, or taken
+/// back (`add` false).
+fn cast_votes(
+    votes: &mut [u16],
+    stride: usize,
+    ([x, y], [gx, gy]): ([i32; 2], [f32; 2]),
+    r_min: usize,
+    r_max: usize,
+    add: bool,
+) {
+    // The padded cell of a coordinate: rounding half away from zero, as
+    // `f32::round`, without its libm call; at or below -0.5 the padding's
+    // first cell.
+    let cell = |v: f32| {
+        let t = v + 0.5;
+        if t > 0.0 { t as i32 as usize + 1 } else { 0 }
+    };
+    let (x, y) = (x as f32, y as f32);
+    // The radius counted in f32 (exact for these small integers): no
+    // integer-to-float conversion per vote.
+    let mut r = r_min as f32;
+    for _ in r_min..=r_max {
+        let v = &mut votes[cell(y - gy * r) * stride + cell(x - gx * r)];
+        *v = if add {
+            v.saturating_add(1)
+        } else {
+            v.saturating_sub(1)
+        };
+        r += 1.0;
+    }
+}
+
+/// Whether an edge is on the rim of the circle of radius `r` about `c`:
+/// within [`RIM_BINS_PX`] of it, its gradient pointing away from the centre
+/// (as [`EdgeVoter::radius_at`] counts it for that radius).
+fn on_rim(c: [f64; 2], r: f64, ([x, y], [gx, gy]): ([i32; 2], [f32; 2])) -> bool {
+    let (dx, dy) = (f64::from(x) - c[0], f64::from(y) - c[1]);
+    let d = (dx * dx + dy * dy).sqrt();
+    (d - r).abs() <= RIM_BINS_PX && dx * f64::from(gx) + dy * f64::from(gy) >= RADIAL_COS * d
 }
 
 /// Keeps the `n` cells (x, y, votes) of `found` (in raster order) with the
@@ -323,6 +534,41 @@ mod tests {
             assert!(off < 6.0, "{with_bar}: {c:?}");
             assert!((c.radius_px - 60.0).abs() < 8.0, "{with_bar}: {c:?}");
         }
+    }
+
+    /// A hazed disc (radius 60 px at (400, 300)) with the probe's darker
+    /// tip (radius 16 px) at its centre; decimated by 4.
+    fn tip_in_disc() -> Decimated {
+        let img = GrayImage::from_fn(800, 600, |x, y| {
+            let r = (f64::from(x) - 400.0).hypot(f64::from(y) - 300.0);
+            image::Luma([if r < 16.0 {
+                20
+            } else if r < 60.0 {
+                150
+            } else {
+                190
+            }])
+        });
+        let mut d = Decimated::default();
+        d.update(&img, 4);
+        d
+    }
+
+    #[test]
+    fn a_circle_nested_with_a_stronger_one_is_found_once_that_ones_rim_is_taken_out() {
+        let img = tip_in_disc();
+        let mut voter = EdgeVoter::default();
+        let found = voter.find(&img, 12.0, 10.0, 200.0, 4);
+        // Radii to a decimated pixel (4 px).
+        let near = |c: &EdgeCircle, r: f64| {
+            (c.centre_px[0] - 400.0).hypot(c.centre_px[1] - 300.0) < 6.0
+                && (c.radius_px - r).abs() <= (0.15 * r).max(4.0)
+        };
+        // One peak for both: the tip's rim, whose votes bury the disc's.
+        assert!(near(&found[0], 16.0), "{found:?}");
+        assert!(!found.iter().any(|c| near(c, 60.0)), "{found:?}");
+        let nested = voter.nested(&img, &found, 2);
+        assert!(near(&nested[0], 60.0), "{nested:?}");
     }
 
     #[test]

@@ -2,16 +2,18 @@
 //!
 //! 1. `coarse`: dark connected regions of a decimated frame, at a few
 //!    thresholds, give candidate centres and sizes (cheap, whole frame);
-//!    `edges`, gradient voting, gives more when they find no clear drogue
-//!    (and, opt-in, `coarse::local`: regions dark against their own
-//!    neighbourhood).
+//!    `edges`, gradient voting, gives more when they find no clear drogue,
+//!    and when none of those verifies, the circles around its own (the disc
+//!    around the probe's tip) with their rims taken out (and, opt-in,
+//!    `coarse::local`: regions dark against their own neighbourhood).
 //! 2. `rim`: rays from a candidate centre at full resolution give one
 //!    sub-pixel dark-to-light edge each; a quick robust ellipse fit
 //!    (`conic_fit`) of them moves the centre onto the disc, and a second,
 //!    narrow ray pass around that ellipse gives the rim points.
 //! 3. Evidence ranks the candidates: the share of rays whose edge lies on one
 //!    ellipse (shape), a plausible size and axis ratio (range, tilt), enough
-//!    contrast, and the canopy's darker outer rim band beyond the edge.
+//!    contrast, no larger dark shape around it (the canopy right past the
+//!    rim), and the canopy's darker outer rim band beyond the edge.
 //!
 //! With a tracking hint only step 2's narrow pass runs, around the
 //! predicted ellipse; the full search follows only when that fails.
@@ -229,9 +231,14 @@ enum Reject {
     /// The canopy band is missing around a disc large enough to show it
     /// (share of rays that show it).
     NoCanopy(f64),
+    /// The ring just outside the rim is darker than the canopy's band
+    /// beyond it by more than `evidence::MAX_RISE_BEYOND` of the rim's
+    /// contrast (that rise): a dark shape inside a larger one, such as the
+    /// probe's tip inside the disc.
+    Nested(f64),
     /// The evidence score is below `min_score`.
     LowScore(f64),
-    /// More than [`CLIPPED_SHARE`] of the rim's steps run into the ends of
+    /// More than [`verify::CLIPPED_SHARE`] of the rim's steps run into the ends of
     /// the widest window (share that do): blurred beyond what can be
     /// measured.
     Blurred(f64),

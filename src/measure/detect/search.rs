@@ -27,6 +27,16 @@ const INNER_SEED_STREAM: u64 = 0x1_0000;
 
 /// Circles of the edge source verified per frame, strongest first.
 const EDGE_SEEDS: usize = 4;
+/// Circles the edge source gives around its first ones once their rims are
+/// taken out ([`super::edges::EdgeVoter::nested`]), tried when no candidate
+/// verified at all.
+const NESTED_SEEDS: usize = 2;
+/// A nested circle's first ray pass looks from this share of its radius
+/// to this many radii: its radius is measured from its own rim (to a
+/// decimated pixel or two), and the rim inside it is the smaller circle's,
+/// tried before.
+const NESTED_SEED_FROM: f64 = 0.5;
+const NESTED_SEED_REACH: f64 = 2.0;
 
 /// Regions of the locally normalised frame verified per frame (over all
 /// its windows), whole and round ones first, then larger first.
@@ -55,11 +65,15 @@ pub(super) struct Seed {
     pub(super) theta: f64,
     /// How far the first ray pass looks, in multiples of the seed's radius.
     pub(super) reach: f64,
+    /// Where the first ray pass starts, in multiples of the seed's radius
+    /// (0: at the centre).
+    pub(super) from: f64,
     /// Which point of its blob: 0 the centroid, 1 the deepest point, 2 the
     /// point best ringed by light; 3 a circle of the edge source; 4 the
     /// disc looked for inside a verified ellipse (see
     /// [`Detector::prefer_inner_disc`]); 5-7 as 0-2, of a region of the
-    /// locally normalised frame ([`Detector::try_local_contrast`]).
+    /// locally normalised frame ([`Detector::try_local_contrast`]); 8 a
+    /// circle of the edge source nested with a stronger one.
     pub(super) kind: u8,
 }
 
@@ -97,6 +111,7 @@ fn region_seeds(b: &Blob, round: bool, kind_offset: u8) -> Vec<Seed> {
         b_px: b.b_px,
         theta: b.theta,
         reach: 1.8,
+        from: 0.0,
         kind: kind_offset,
     }];
     let off = (b.core_px[0] - b.centre_px[0]).hypot(b.core_px[1] - b.centre_px[1]);
@@ -107,6 +122,7 @@ fn region_seeds(b: &Blob, round: bool, kind_offset: u8) -> Vec<Seed> {
             b_px: b.core_radius_px,
             theta: 0.0,
             reach: UNSURE_SEED_REACH,
+            from: 0.0,
             kind: kind_offset + 1,
         });
     }
@@ -122,6 +138,7 @@ fn region_seeds(b: &Blob, round: bool, kind_offset: u8) -> Vec<Seed> {
             b_px: b.ringed_radius_px,
             theta: 0.0,
             reach: UNSURE_SEED_REACH,
+            from: 0.0,
             kind: kind_offset + 2,
         });
     }
@@ -259,6 +276,7 @@ impl Detector {
                     b_px: c.radius_px,
                     theta: 0.0,
                     reach: UNSURE_SEED_REACH,
+                    from: 0.0,
                     kind: 3,
                 };
                 if tried.iter().any(|t| t.same_as(&seed)) {
@@ -268,6 +286,32 @@ impl Detector {
                 tracing::debug!(strength = c.strength, "edge source circle");
                 if self.try_seed(image, &seed, 1000 + i as u64, accept, &mut verified) {
                     break;
+                }
+            }
+            // Circles nested with those (the disc around the probe's tip),
+            // when no candidate verified at all: their first pass starts
+            // inside their own rim, so that it does not take the smaller
+            // circle's rim again.
+            if verified.is_empty() {
+                let nested = self.voter.nested(&self.decimated, &circles, NESTED_SEEDS);
+                for (i, c) in nested.iter().enumerate() {
+                    let seed = Seed {
+                        centre_px: c.centre_px,
+                        a_px: c.radius_px,
+                        b_px: c.radius_px,
+                        theta: 0.0,
+                        reach: NESTED_SEED_REACH,
+                        from: NESTED_SEED_FROM,
+                        kind: 8,
+                    };
+                    if tried.iter().any(|t| t.same_as(&seed)) {
+                        continue;
+                    }
+                    tried.push(seed.clone());
+                    tracing::debug!(strength = c.strength, "nested edge circle");
+                    if self.try_seed(image, &seed, 1500 + i as u64, accept, &mut verified) {
+                        break;
+                    }
                 }
             }
         }
@@ -423,6 +467,7 @@ impl Detector {
             theta: e.theta,
             // The wide pass reaches `reach * r + 4` px (r the seed's radius).
             reach: ((INNER_REACH_OUTER_RADII * e.b - 4.0) / (ratio * e.b)).max(1.0),
+            from: 0.0,
             kind: 4,
         };
         let inner = match self.verify_seed(image, &seed, index ^ INNER_SEED_STREAM, &[]) {

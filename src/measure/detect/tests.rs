@@ -64,6 +64,9 @@ struct Scene {
     bite: Option<([f64; 2], f64)>,
     /// Sky level at the top of the frame (it brightens by 0.03 a row).
     sky_level: f64,
+    /// A dark circle (centre, radius, level) in front of the disc: the
+    /// probe's tip.
+    tip: Option<([f64; 2], f64, f64)>,
 }
 
 impl Scene {
@@ -80,10 +83,16 @@ impl Scene {
             hose: None,
             bite: None,
             sky_level: 130.0,
+            tip: None,
         }
     }
 
     fn level(&self, u: f64, v: f64) -> f64 {
+        if let Some((c, r, level)) = self.tip
+            && (u - c[0]).hypot(v - c[1]) <= r
+        {
+            return level;
+        }
         if let Some((from, length, half_width, level)) = self.hose
             && v <= from[1]
             && v >= from[1] - length
@@ -579,6 +588,7 @@ fn a_seed_on_a_verified_rim_is_not_verified_again() {
         b_px: radius,
         theta: 0.0,
         reach: 1.8,
+        from: 0.0,
         kind: 0,
     };
     let first = detector
@@ -778,4 +788,49 @@ fn a_blur_nearly_as_long_as_the_radius_keeps_the_disc_size() {
     }
     // Every 32 px blur, and the 40 px one along the major axis.
     assert!(found >= 4, "found {found} of 6");
+}
+
+#[test]
+fn the_probes_tip_inside_a_hazed_disc_is_not_the_disc() {
+    // Haze lifts the disc far more than the nearer probe: its tip is the
+    // darkest circle, with the disc's dark just outside its rim and the
+    // canopy beyond.
+    let (w, h) = (400, 300);
+    let cam = camera(w, h);
+    let truth = Ellipse::new(200.3, 150.4, 32.0, 31.0, 0.2);
+    let mut scene = Scene::new(truth);
+    scene.disc_level = 100.0;
+    scene.canopy_level = 190.0;
+    scene.tip = Some(([201.0, 151.0], 20.0, 10.0));
+    let img = scene.render(w, h, 2.0, 5);
+    let mut detector = detector(&cam);
+    let seed = |centre_px: [f64; 2], radius: f64, reach: f64, from: f64| search::Seed {
+        centre_px,
+        a_px: radius,
+        b_px: radius,
+        theta: 0.0,
+        reach,
+        from,
+        kind: 3,
+    };
+    // A first pass that reaches only the tip's rim: the tip is a fine dark
+    // circle, but it lies inside a larger dark shape.
+    let tip = detector.verify_seed(&img, &seed([201.0, 151.0], 20.0, 1.3, 0.0), 0, &[]);
+    let why = tip.as_ref().err();
+    assert!(
+        matches!(why, Some(Reject::Nested(rise)) if *rise > 0.5),
+        "{why:?}"
+    );
+    // The disc, from a first pass that starts past the tip.
+    let disc = detector
+        .verify_seed(&img, &seed([200.0, 150.0], 32.0, 2.0, 0.75), 1, &[])
+        .expect("the disc verifies");
+    assert!(
+        truth.max_param_error_px(&disc.ellipse) < 1.0,
+        "{:?}",
+        disc.ellipse
+    );
+    // And the whole search gives the disc, never the tip.
+    let found = detector.detect(&img, None).expect("detected");
+    assert!(truth.max_param_error_px(&fit_points(&found)) < 1.0);
 }

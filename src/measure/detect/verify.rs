@@ -204,16 +204,20 @@ impl Detector {
             let r = polar_radius(seed.a_px, seed.b_px, seed.theta, phi).min(longest);
             let dir = [phi.cos(), phi.sin()];
             let s_max = seed.reach * r + 4.0;
+            let s_min = (seed.from * r).max(1.0);
             // About a pixel of accuracy on a small seed, a few percent of
             // its size on a large one, is enough here (the narrow passes,
             // 10 % of the radius wide, refine it): a fixed number of steps
             // per radius, so that a large dark region (cloud, shadow) costs
             // no more than a disc.
             let step = (r / WIDE_STEPS_PER_RADIUS).max(0.5);
-            rim::profile(image, c, dir, 1.0, s_max, step, &mut self.profile);
-            if let Some(e) =
-                rim::strongest_rise(&self.profile, 1.0, step, self.cfg.min_contrast_gray as f32)
-            {
+            rim::profile(image, c, dir, s_min, s_max, step, &mut self.profile);
+            if let Some(e) = rim::strongest_rise(
+                &self.profile,
+                s_min,
+                step,
+                self.cfg.min_contrast_gray as f32,
+            ) {
                 let p = [c[0] + e.s * dir[0], c[1] + e.s * dir[1]];
                 points.push(self.camera.undistort_px(p));
             }
