@@ -33,7 +33,7 @@ records with `error`); 1 the output (JSON lines or --log) could not be written; 
 file or input."
 )]
 pub struct ProcessArgs {
-    /// A folder of images (png, jpg, pgm, bmp; lexicographic order) or an MCAP log.
+    /// A folder of images (png, jpg, pgm, bmp; lexicographic order), one image, or an MCAP log.
     pub input: PathBuf,
     /// Camera file (ROS camera_info or OpenCV YAML); required for a folder,
     /// optional for a log (default: the log's /camera/calibration).
@@ -129,6 +129,14 @@ impl Input {
                 DirSource::open(&args.input, timing).map_err(setup)?,
             ));
         }
+        if args.input.is_file() && crate::image_io::is_image_path(&args.input) {
+            // One image: a folder of one.
+            if args.camera.is_none() {
+                return Err(ProcessError::Setup("an image needs --camera".into()));
+            }
+            let timing = FolderTiming::Period(FOLDER_FRAME_PERIOD_NS);
+            return Ok(Self::Dir(DirSource::one_image(&args.input, timing)));
+        }
         if args.input.is_file() {
             // An MCAP log: replay its /camera/image with its own camera
             // unless --camera overrides it.
@@ -138,7 +146,7 @@ impl Input {
                 .map_err(|e| ProcessError::Setup(format!("input {input}: {e}")));
         }
         Err(ProcessError::Setup(format!(
-            "input {}: neither a folder of images nor an MCAP log",
+            "input {}: neither a folder of images, an image nor an MCAP log",
             args.input.display()
         )))
     }
@@ -183,6 +191,8 @@ fn provenance(args: &ProcessArgs) -> RunProvenance {
     let input = args.input.display().to_string();
     let (source, source_details) = if args.input.is_dir() {
         (format!("dir:{input}"), vec![("folder".into(), input)])
+    } else if crate::image_io::is_image_path(&args.input) {
+        (format!("image:{input}"), vec![("image".into(), input)])
     } else {
         (
             format!("mcap:{input}"),

@@ -67,6 +67,18 @@ impl DirSource {
         })
     }
 
+    /// One image file, as a folder holding only it (`process IMAGE`).
+    pub fn one_image(path: &Path, timing: FolderTiming) -> Self {
+        Self {
+            images_total: 1,
+            images: vec![path.to_path_buf()].into_iter(),
+            seq: 0,
+            timing,
+            others: 0,
+            expected: None,
+        }
+    }
+
     /// The folder's image files (each one item).
     pub fn images(&self) -> usize {
         self.images_total

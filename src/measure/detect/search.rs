@@ -3,6 +3,7 @@
 //! verified, and the inner disc preferred to the canopy's rim.
 
 use super::coarse::{self, Blob};
+use super::edges::EdgeCircle;
 use super::{Detector, Verified};
 use image::GrayImage;
 
@@ -55,6 +56,17 @@ const LOCAL_KIND_OFFSET: u8 = 5;
 /// to this many of its largest (a disc merged with a probe is longer).
 const LOCAL_MIN_RADIUS_SHARE: f64 = 0.5;
 const LOCAL_MAX_RADIUS_SHARE: f64 = 1.5;
+
+/// How the edge source's circles are tried: the first ray pass's reach and
+/// start (multiples of the radius), the seeds' kind, and the first of their
+/// random streams (one per circle, by its place in the list).
+#[derive(Clone, Copy)]
+struct EdgeSeeds {
+    reach: f64,
+    from: f64,
+    kind: u8,
+    stream: u64,
+}
 
 /// Where and how large a coarse candidate is, full-res distorted pixels.
 #[derive(Clone, Debug)]
@@ -269,50 +281,26 @@ impl Detector {
                 self.max_radius_px,
                 EDGE_SEEDS,
             );
-            for (i, c) in circles.iter().enumerate() {
-                let seed = Seed {
-                    centre_px: c.centre_px,
-                    a_px: c.radius_px,
-                    b_px: c.radius_px,
-                    theta: 0.0,
-                    reach: UNSURE_SEED_REACH,
-                    from: 0.0,
-                    kind: 3,
-                };
-                if tried.iter().any(|t| t.same_as(&seed)) {
-                    continue;
-                }
-                tried.push(seed.clone());
-                tracing::debug!(strength = c.strength, "edge source circle");
-                if self.try_seed(image, &seed, 1000 + i as u64, accept, &mut verified) {
-                    break;
-                }
-            }
+            let first = EdgeSeeds {
+                reach: UNSURE_SEED_REACH,
+                from: 0.0,
+                kind: 3,
+                stream: 1000,
+            };
+            self.try_edge_circles(image, &circles, first, accept, &mut tried, &mut verified);
             // Circles nested with those (the disc around the probe's tip),
             // when no candidate verified at all: their first pass starts
             // inside their own rim, so that it does not take the smaller
             // circle's rim again.
             if verified.is_empty() {
                 let nested = self.voter.nested(&self.decimated, &circles, NESTED_SEEDS);
-                for (i, c) in nested.iter().enumerate() {
-                    let seed = Seed {
-                        centre_px: c.centre_px,
-                        a_px: c.radius_px,
-                        b_px: c.radius_px,
-                        theta: 0.0,
-                        reach: NESTED_SEED_REACH,
-                        from: NESTED_SEED_FROM,
-                        kind: 8,
-                    };
-                    if tried.iter().any(|t| t.same_as(&seed)) {
-                        continue;
-                    }
-                    tried.push(seed.clone());
-                    tracing::debug!(strength = c.strength, "nested edge circle");
-                    if self.try_seed(image, &seed, 1500 + i as u64, accept, &mut verified) {
-                        break;
-                    }
-                }
+                let around = EdgeSeeds {
+                    reach: NESTED_SEED_REACH,
+                    from: NESTED_SEED_FROM,
+                    kind: 8,
+                    stream: 1500,
+                };
+                self.try_edge_circles(image, &nested, around, accept, &mut tried, &mut verified);
             }
         }
         // The third source, when neither gave a clear drogue: dark regions
@@ -330,6 +318,38 @@ impl Detector {
         );
         self.blobs = blobs;
         verified
+    }
+
+    /// Tries the edge source's `circles` as seeds of `how`, strongest
+    /// first, until one scores `accept`; seeds tried before are skipped.
+    fn try_edge_circles(
+        &mut self,
+        image: &GrayImage,
+        circles: &[EdgeCircle],
+        how: EdgeSeeds,
+        accept: f64,
+        tried: &mut Vec<Seed>,
+        verified: &mut Vec<Verified>,
+    ) {
+        for (i, c) in circles.iter().enumerate() {
+            let seed = Seed {
+                centre_px: c.centre_px,
+                a_px: c.radius_px,
+                b_px: c.radius_px,
+                theta: 0.0,
+                reach: how.reach,
+                from: how.from,
+                kind: how.kind,
+            };
+            if tried.iter().any(|t| t.same_as(&seed)) {
+                continue;
+            }
+            tried.push(seed.clone());
+            tracing::debug!(strength = c.strength, kind = how.kind, "edge source circle");
+            if self.try_seed(image, &seed, how.stream + i as u64, accept, verified) {
+                break;
+            }
+        }
     }
 
     /// The local-contrast source ([`coarse::LocalContrast`]): in each of the
