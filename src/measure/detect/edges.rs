@@ -91,8 +91,6 @@ pub struct EdgeVoter {
     histogram: Vec<u32>,
     /// The radii voted for by the last [`EdgeVoter::find`], decimated pixels.
     radii: (usize, usize),
-    /// The decimation factor of the last [`EdgeVoter::find`].
-    factor: f64,
 }
 
 impl EdgeVoter {
@@ -116,7 +114,6 @@ impl EdgeVoter {
         self.collect_edges(img, MIN_GRADIENT_SHARE * min_contrast_gray);
         self.vote(w, h, r_min, r_max);
         self.radii = (r_min, r_max);
-        self.factor = f;
         tracing::trace!(edges = self.edges.len(), r_min, r_max, "edge pixels voting");
         let peaks = self.peaks(w, h, r_min, max_peaks);
         peaks
@@ -154,22 +151,19 @@ impl EdgeVoter {
             return Vec::new();
         }
         let (r_min, r_max) = self.radii;
-        let f = self.factor;
-        let mut known: Vec<Peak> = found
+        let f = img.factor.max(1) as f64;
+        let found_here: Vec<Peak> = found
             .iter()
             .map(|c| Peak {
-                centre: [
-                    (c.centre_px[0] + 0.5) / f - 0.5,
-                    (c.centre_px[1] + 0.5) / f - 0.5,
-                ],
+                centre: img.to_decimated(c.centre_px),
                 radius: c.radius_px / f,
             })
             .collect();
-        for p in known.clone() {
+        for p in &found_here {
             self.take_rim(p.centre, p.radius, r_min, r_max);
         }
+        let mut known = found_here.clone();
         let floor = (MIN_RIM_SHARE * std::f64::consts::TAU * r_min as f64).ceil() as u32;
-        let found_here = known.clone();
         // Only near the circles found: a nested circle's centre is within
         // [`NESTED_REACH`] of the smaller one's.
         let mut cells: Vec<(usize, usize, u32)> = Vec::new();

@@ -131,12 +131,29 @@ impl Decimated {
         let f = self.factor as f64;
         [(x + 0.5) * f - 0.5, (y + 0.5) * f - 0.5]
     }
+
+    /// Decimated pixel position of full-resolution pixel coordinates: the
+    /// inverse of [`Self::to_full`].
+    pub fn to_decimated(&self, full_px: [f64; 2]) -> [f64; 2] {
+        let f = self.factor.max(1) as f64;
+        [(full_px[0] + 0.5) / f - 0.5, (full_px[1] + 0.5) / f - 0.5]
+    }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
     use image::Luma;
+
+    #[test]
+    fn to_decimated_undoes_to_full() {
+        let mut d = Decimated::default();
+        d.update(&GrayImage::new(64, 48), 4);
+        // A block's centre: decimated pixel (2, 3) is full-res 8..11, 12..15.
+        assert_eq!(d.to_full(2.0, 3.0), [9.5, 13.5]);
+        assert_eq!(d.to_decimated([9.5, 13.5]), [2.0, 3.0]);
+        assert_eq!(d.to_decimated(d.to_full(7.25, 0.5)), [7.25, 0.5]);
+    }
 
     #[test]
     fn decimation_is_the_rounded_block_mean() {
