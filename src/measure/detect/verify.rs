@@ -11,9 +11,11 @@ use crate::measure::ellipse::Ellipse;
 use image::GrayImage;
 use std::f64::consts::TAU;
 
-/// Rim ray spacing while candidates are compared, in multiples of the
-/// configured spacing.
-const SCOUT_SPACING_FACTOR: f64 = 3.0;
+/// Rim ray spacing while candidates are compared, pixels (or the
+/// configured spacing, if sparser). Fixed, not a multiple of
+/// `rim_point_spacing_px`: the measuring pass's density changes what is
+/// measured, not which candidates are found.
+const SCOUT_SPACING_PX: f64 = 6.0;
 
 /// Narrow-pass windows are widened by this factor while more than
 /// [`CLIPPED_SHARE`] of the steps run into their ends (blur), up to
@@ -253,7 +255,7 @@ impl Detector {
         self.verify_settled(
             image,
             &first,
-            SCOUT_SPACING_FACTOR * self.cfg.rim_point_spacing_px,
+            SCOUT_SPACING_PX.max(self.cfg.rim_point_spacing_px),
             self.cfg.max_rim_points,
             RimUse::Scout,
         )
