@@ -144,6 +144,13 @@ const NARROW_STEP_PX: f64 = 0.5;
 const NOISE_ROW_STRIDE: usize = 16;
 const TRACKED_NOISE_ROW_STRIDE: usize = 64;
 
+/// Tracked frames re-measure the noise on every this many frames and keep
+/// the last estimate in between (at most 0.1 s old at 30 Hz): the sensor's
+/// noise follows its gain, which auto-exposure moves over seconds, not
+/// from one frame to the next, and the estimate was an eighth of a tracked
+/// frame's work. A full-frame search always measures it afresh.
+const TRACKED_NOISE_EVERY: u32 = 4;
+
 /// Half-width (samples) of the narrow pass's smoothing for image noise
 /// `sigma` (gray levels): a box of `m = 2 h + 1` samples applied twice
 /// averages about `m` samples, so `m = (sigma / SMOOTHED_NOISE_GRAY)^2`.
@@ -278,6 +285,8 @@ pub struct Detector {
     smooth_half: usize,
     /// The frame's noise, gray levels ([`rim::noise_sigma`]).
     noise_gray: f64,
+    /// Frames measured with `noise_gray` since it was measured (0: never).
+    noise_age: u32,
     /// [`rim::smoothing_spread_px`] for each half-width up to
     /// [`MAX_SMOOTH_HALF`].
     smoothing_spread_px: Vec<f64>,
@@ -352,6 +361,7 @@ impl Detector {
             raw_profile: Vec::new(),
             smooth_half: 0,
             noise_gray: 0.0,
+            noise_age: 0,
             smoothing_spread_px: (0..=MAX_SMOOTH_HALF.max(MAX_RAMP_SMOOTH_HALF))
                 .map(|h| rim::smoothing_spread_px(h, NARROW_STEP_PX))
                 .collect(),
@@ -366,7 +376,11 @@ impl Detector {
             return None;
         }
         if let Some(h) = hint.filter(|h| h.a.is_finite() && h.b > 0.5 && h.a < 1e5) {
-            self.measure_noise(image, TRACKED_NOISE_ROW_STRIDE);
+            if self.noise_age == 0 || self.noise_age >= TRACKED_NOISE_EVERY {
+                self.measure_noise(image, TRACKED_NOISE_ROW_STRIDE);
+            } else {
+                self.noise_age += 1;
+            }
             match self.verify_settled(
                 image,
                 h,
@@ -404,6 +418,7 @@ impl Detector {
         let noise = rim::noise_sigma(image, row_stride);
         self.smooth_half = smoothing_half(noise);
         self.noise_gray = noise;
+        self.noise_age = 1;
         tracing::debug!(noise, smooth_half = self.smooth_half, "frame noise");
     }
 

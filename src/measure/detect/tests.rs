@@ -875,3 +875,36 @@ fn a_ray_on_every_rim_pixel_measures_the_centre_closer() {
         "rms centre error dense / sparse {ratio:.2} (sparse {rms:.4} px)"
     );
 }
+
+/// A tracked frame keeps the noise measured on the frames before it and
+/// measures it afresh on every `TRACKED_NOISE_EVERY`th: when the noise
+/// rises from 2 to 12 gray levels (a camera's gain raised), the estimate
+/// follows within that many frames, and the disc is measured on each.
+#[test]
+fn tracked_frames_follow_a_change_of_noise_within_a_few_frames() {
+    let (w, h) = (320, 240);
+    let cam = camera(w, h);
+    let truth = Ellipse::new(158.3, 121.6, 38.0, 31.0, 0.4);
+    let mut det = detector(&cam);
+    let quiet = Scene::new(truth).render(w, h, 2.0, 41);
+    assert!(det.detect(&quiet, None).is_some());
+    let quiet_noise = det.noise_gray;
+    let mut noisy_frames = (0..super::TRACKED_NOISE_EVERY)
+        .map(|k| Scene::new(truth).render(w, h, 12.0, 50 + u64::from(k)));
+    let first = noisy_frames.next().unwrap();
+    assert!(det.detect(&first, Some(&truth)).is_some());
+    assert_eq!(
+        det.noise_gray, quiet_noise,
+        "the first tracked frame keeps the estimate"
+    );
+    for img in noisy_frames {
+        assert!(det.detect(&img, Some(&truth)).is_some());
+    }
+    // Measured afresh by now: near 12 (the estimate's bins are 0.6 apart).
+    assert!(
+        (det.noise_gray - 12.0).abs() < 1.5 && quiet_noise < 3.5,
+        "noise {} after {} tracked frames, {quiet_noise} before",
+        det.noise_gray,
+        super::TRACKED_NOISE_EVERY
+    );
+}
