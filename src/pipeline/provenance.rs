@@ -22,7 +22,7 @@ pub struct RunProvenance {
     pub clock: String,
 }
 
-/// The run's metadata record ([`RUN_METADATA`]): version, git hash, the
+/// The run's metadata record (`log::metadata::RUN_METADATA`): version, git hash, the
 /// config as TOML (the signing passphrase left out), the camera file, the
 /// mount, the source (with scenario and seed for simulated runs) and the
 /// MAVLink connection with our system and component ids.

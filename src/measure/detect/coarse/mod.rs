@@ -120,7 +120,7 @@ pub struct BlobFinder {
     /// Size of each region of the highest threshold.
     region_areas: Vec<usize>,
     /// The ring test's offsets for each chamfer distance (below
-    /// [`RING_CACHE`]), computed when first needed.
+    /// `ridge::RING_CACHE`), computed when first needed.
     ring_cache: Vec<Option<[RingStep; RING_SAMPLES]>>,
 }
 
