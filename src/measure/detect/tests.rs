@@ -25,15 +25,7 @@ fn camera(w: u32, h: u32) -> CameraModel {
 }
 
 fn detector(cam: &CameraModel) -> Detector {
-    let cfg = Config::embedded();
-    Detector::new(
-        &cfg.detect,
-        cam,
-        super::canopy::DrogueCircles {
-            inner_radius_m: cfg.drogue.inner_radius_m,
-            canopy_radius_m: cfg.drogue.canopy_radius_m,
-        },
-    )
+    crate::testing::detector(&Config::embedded(), cam)
 }
 
 /// Implicit "radius" of a point in an ellipse's frame: 1 on the ellipse.
@@ -478,14 +470,7 @@ fn the_canopy_taken_for_the_disc_gives_way_to_the_disc_inside() {
     scene.band_level = 115.0;
     scene.sky_level = 165.0;
     let img = scene.render(w, h, 2.0, 23);
-    let mut detector = Detector::new(
-        &cfg.detect,
-        &cam,
-        super::canopy::DrogueCircles {
-            inner_radius_m: cfg.drogue.inner_radius_m,
-            canopy_radius_m: cfg.drogue.canopy_radius_m,
-        },
-    );
+    let mut detector = crate::testing::detector(&cfg, &cam);
     let spacing = cfg.detect.rim_point_spacing_px;
     let max_points = cfg.detect.max_rim_points;
     // The scene's canopy rim (the band's outer edge) is at 2.2 disc radii.
@@ -850,10 +835,7 @@ fn a_ray_on_every_rim_pixel_measures_the_centre_closer() {
     let mut dense_cfg = cfg.detect.clone();
     dense_cfg.rim_point_spacing_px = 1.0;
     assert_eq!(cfg.detect.rim_point_spacing_px, 2.0, "the default spacing");
-    let circles = super::canopy::DrogueCircles {
-        inner_radius_m: cfg.drogue.inner_radius_m,
-        canopy_radius_m: cfg.drogue.canopy_radius_m,
-    };
+    let circles = crate::testing::drogue_circles(&cfg);
     let (mut sparse, mut dense) = (0.0, 0.0);
     let draws = 16;
     for seed in 0..draws {
