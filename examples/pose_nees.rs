@@ -9,7 +9,8 @@
 //! neither is given); `--sim-frames` per sweep level (default 20, 0: none);
 //! `--only` keeps the sets whose name contains TEXT; `--scenario-frames`
 //! per scenario (approach, station_keeping; default 0: none); `--worst K`
-//! lists each set's K largest NEES frames; `--scale F` also prints each set
+//! lists each set's K largest NEES frames (a sweep frame with the settings
+//! it was drawn with); `--scale F` also prints each set
 //! with its standard deviations times F (`[link] target_relative_std_scale`);
 //! `--against-truth` scores the reference sets against the true centre
 //! also where the solution given is the mirror's (by default against the

@@ -220,6 +220,8 @@ pub struct SweepFrame {
     pub image: GrayImage,
     /// `None` on drogue-free frames.
     pub drogue: Option<DrogueTruth>,
+    /// The settings the frame was drawn with.
+    pub settings: Settings,
 }
 
 /// Renders sweep frames; keeps one renderer per lens (the ray table is the
@@ -251,20 +253,32 @@ fn mix(mut z: u64) -> u64 {
     z ^ (z >> 31)
 }
 
-/// Scene settings of one frame before it is laid out.
+/// Scene settings of one frame before it is laid out: what a frame's
+/// error can be traced back to.
 #[derive(Clone, Debug)]
-struct Settings {
-    range_m: f64,
-    tilt_deg: f64,
-    gain: f64,
-    read_noise_dn: f64,
-    vignette: f64,
-    haze: f64,
-    blur_px: f64,
-    glare_width_px: Option<f64>,
-    probe_bin: Option<(f64, f64)>,
-    distractors: usize,
-    distortion: [f64; 5],
+pub struct Settings {
+    /// Range asked for, metres.
+    pub range_m: f64,
+    /// Tilt asked for, degrees.
+    pub tilt_deg: f64,
+    /// Exposure gain (1: nominal).
+    pub gain: f64,
+    /// Read noise, digital numbers (gray levels) rms.
+    pub read_noise_dn: f64,
+    /// Vignetting strength at the corners.
+    pub vignette: f64,
+    /// Haze, share of the scene replaced by the sky's level.
+    pub haze: f64,
+    /// Linear motion blur length, pixels.
+    pub blur_px: f64,
+    /// Width of a glare streak over the disc, pixels, if any.
+    pub glare_width_px: Option<f64>,
+    /// Share of the rim the probe may hide (low, high), if a probe.
+    pub probe_bin: Option<(f64, f64)>,
+    /// Dark distractor shapes.
+    pub distractors: usize,
+    /// Plumb-bob distortion (k1, k2, p1, p2, k3).
+    pub distortion: [f64; 5],
 }
 
 impl Sweep {
@@ -384,6 +398,7 @@ impl Sweep {
             camera,
             image,
             drogue: truth,
+            settings: s,
         }
     }
 }
@@ -472,6 +487,17 @@ mod tests {
         assert_eq!(fa.drogue, fb.drogue);
         let other = a.frame(&level, 4);
         assert_ne!(fa.image, other.image);
+    }
+
+    #[test]
+    fn a_frame_carries_the_setting_its_level_asked_for() {
+        let mut sweep = Sweep::new(3);
+        let blur = sweep.frame(&Level::new(Factor::Blur, 16.0), 0).settings;
+        assert_eq!(blur.blur_px, 16.0);
+        let noise = sweep.frame(&Level::new(Factor::Noise, 12.0), 0).settings;
+        assert_eq!((noise.read_noise_dn, noise.blur_px), (12.0, 0.0));
+        let haze = sweep.frame(&Level::new(Factor::Haze, 0.4), 1).settings;
+        assert_eq!(haze.haze, 0.4);
     }
 
     #[test]

@@ -312,12 +312,18 @@ pub fn sweep_level(sweep: &mut Sweep, level: &Level, frames: u64) -> SetNees {
             image: f.image,
             origin: FrameOrigin::File(PathBuf::from(format!("sweep/{}/{index}", level.label()))),
         });
+        let c = &f.settings;
         let label = format!(
-            "{} #{index} tilt {:.0} range {:.1} probe {:.2}",
+            "{} #{index} tilt {:.0} range {:.1} probe {:.2} blur {:.1} noise {:.1} haze {:.2} gain {:.2} glare {:.0}",
             level.label(),
             t.tilt_deg,
             t.range_m,
-            t.probe_rim_frac
+            t.probe_rim_frac,
+            c.blur_px,
+            c.read_noise_dn,
+            c.haze,
+            c.gain,
+            c.glare_width_px.unwrap_or(0.0),
         );
         let truth = [
             t.position_camera,
