@@ -47,8 +47,21 @@ fn a_full_disk_is_reported_the_caller_carries_on_and_the_file_stays_readable() {
     for seq in 0..10 {
         s::log_frame(&log, seq, false);
     }
-    // Room again; after the retry delay logging resumes in part 001.
-    std::thread::sleep(std::time::Duration::from_millis(300));
+    // Wait for the writer to hit the full disk (its error is reported), however
+    // slowly a loaded machine runs it; then room again, and after the retry
+    // delay logging resumes in part 001.
+    let reported = || {
+        errors
+            .lock()
+            .unwrap()
+            .iter()
+            .any(|e| e.contains("no space left on device (test disk)"))
+    };
+    let start = std::time::Instant::now();
+    while !reported() && start.elapsed() < std::time::Duration::from_secs(30) {
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    assert!(reported(), "the full disk was never reported");
     free.store(u64::MAX / 2, Ordering::SeqCst);
     std::thread::sleep(std::time::Duration::from_millis(1200));
     for seq in 10..15 {
