@@ -39,7 +39,7 @@ fn print(set: &SetNees, worst: usize, scale: f64) {
     frames.sort_by(|a, b| b.nees.total_cmp(&a.nees));
     for f in frames.iter().take(worst) {
         println!(
-            "    NEES {:9.2}  err {:7.2} mm  sigma {:7.2} mm  range {:+7.2}/{:.2} lateral {:6.2}/{:.2} mm  inliers {:4}  rms {:.3} px  {}",
+            "    NEES {:9.2}  err {:7.2} mm  sigma {:7.2} mm  range {:+7.2}/{:.2} lateral {:8.4}/{:.4} mm  inliers {:4}  rms {:.3} px  {}",
             f.nees,
             f.error_m * 1e3,
             f.sigma_m * 1e3,

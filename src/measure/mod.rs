@@ -241,6 +241,9 @@ impl Measurer {
                     return None;
                 }
             };
+            // The points beside the probe, the hose or a glare streak are
+            // pulled by its outline: refitted without them.
+            let fitted = self.fitter.without_occluder_edges(undistorted, fitted);
             times.fit_us = micros_since(t);
 
             let t = Instant::now();

@@ -11,6 +11,7 @@ mod adaptive;
 mod algorithm1;
 mod cluster;
 mod geometric;
+mod guard;
 mod least_squares;
 mod ransac;
 pub mod synth;
@@ -250,6 +251,51 @@ impl Fitter {
         }
         fit_with(self.cfg.method, &self.cfg, points_px, seed)
     }
+
+    /// `fitted` (a fit of `points_px`) refitted without the inliers beside a
+    /// hidden stretch of the rim (see `guard`): an orthogonal-distance
+    /// refinement of the remaining inliers from `fitted`'s ellipse. Those
+    /// points are no longer inliers in the result. Unchanged when no point
+    /// is beside a hidden stretch, when fewer than half the inliers would
+    /// remain, when the refit fails, and for the methods other than
+    /// `adaptive` (the paper's, kept as published for comparison).
+    pub fn without_occluder_edges(&self, points_px: &[[f64; 2]], fitted: FitResult) -> FitResult {
+        if self.cfg.method != FitMethod::Adaptive {
+            return fitted;
+        }
+        let e = &fitted.ellipse;
+        let beside = guard::beside_hidden_rim(points_px, [e.cx, e.cy], &fitted.inliers);
+        let keep: Vec<bool> = fitted
+            .inliers
+            .iter()
+            .zip(&beside)
+            .map(|(&inlier, &beside)| inlier && !beside)
+            .collect();
+        let inliers = fitted.inliers.iter().filter(|&&k| k).count();
+        let kept: Vec<[f64; 2]> = points_px
+            .iter()
+            .zip(&keep)
+            .filter(|(_, k)| **k)
+            .map(|(p, _)| *p)
+            .collect();
+        if kept.len() == inliers || 2 * kept.len() < inliers {
+            return fitted;
+        }
+        let Ok(pts) = Points::new(&kept) else {
+            return fitted;
+        };
+        let start = pts.px_to_normalised(e);
+        let refined = geometric::refine(&pts.xy, &start, self.cfg.geometric_iterations);
+        let all = vec![true; pts.xy.len()];
+        match pts.result(&refined, &all) {
+            Ok(r) => FitResult {
+                ellipse: r.ellipse,
+                inliers: keep,
+                rms_residual_px: r.rms_residual_px,
+            },
+            Err(_) => fitted,
+        }
+    }
 }
 
 /// Fits with an explicit method (for comparisons on the same points).
@@ -421,6 +467,51 @@ mod tests {
             assert!(r.rms_residual_px < 1e-6, "{m:?} {}", r.rms_residual_px);
             assert_eq!(r.inliers.len(), pts.len());
         }
+    }
+
+    #[test]
+    fn the_points_beside_a_probe_are_left_out_of_the_refit() {
+        // A disc's rim every 2 degrees; the probe's outline (10 points, far
+        // off the rim) hides 40-58 degrees, and pulls the rim point on
+        // each side of it 0.3 px outward.
+        let truth = Ellipse::new(400.0, 300.0, 60.0, 45.0, 0.3);
+        let mut pts = ring(&truth, 180, std::f64::consts::TAU);
+        let outward = |p: [f64; 2], by: f64| {
+            let (c, s) = (p[0] - truth.cx, p[1] - truth.cy);
+            let r = c.hypot(s);
+            [p[0] + by * c / r, p[1] + by * s / r]
+        };
+        for p in &mut pts[20..30] {
+            *p = outward(*p, 10.0);
+        }
+        for k in [19, 30] {
+            pts[k] = outward(pts[k], 0.3);
+        }
+        let mut fitter = Fitter::new(&cfg());
+        let fitted = fitter.fit(&pts, 3).unwrap();
+        assert!(
+            fitted.inliers[19] && fitted.inliers[30],
+            "the pulled points pass as inliers"
+        );
+        let pulled = (fitted.ellipse.a - truth.a).abs() + (fitted.ellipse.b - truth.b).abs();
+        let guarded = fitter.without_occluder_edges(&pts, fitted);
+        assert!(!guarded.inliers[19] && !guarded.inliers[30]);
+        let left_out: Vec<usize> = (0..180).filter(|&i| !guarded.inliers[i]).collect();
+        assert_eq!(left_out, (19..=30).collect::<Vec<_>>());
+        let e = guarded.ellipse;
+        let left = (e.a - truth.a).abs() + (e.b - truth.b).abs();
+        assert!(pulled > 1e-3, "the pull moved the first fit: {pulled}");
+        assert!(left < 1e-6, "{e:?}");
+        assert!((e.cx - truth.cx).abs() < 1e-6 && (e.cy - truth.cy).abs() < 1e-6);
+    }
+
+    #[test]
+    fn a_whole_rim_is_not_refitted() {
+        let truth = Ellipse::new(400.0, 300.0, 60.0, 45.0, 0.3);
+        let pts = ring(&truth, 120, std::f64::consts::TAU);
+        let mut fitter = Fitter::new(&cfg());
+        let fitted = fitter.fit(&pts, 3).unwrap();
+        assert_eq!(fitter.without_occluder_edges(&pts, fitted.clone()), fitted);
     }
 
     #[test]
