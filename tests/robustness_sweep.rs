@@ -77,7 +77,7 @@ const LIMITS: &[Limit] = &[
     limit("haze 0.6", Some(100), 2, 0, Some(0.015), Some(0.024), Some(0.32)),
     limit("glare streak 4 px wide", Some(100), 1, 0, Some(0.02), Some(0.035), Some(0.16)),
     limit("glare streak 12 px wide", Some(100), 1, 0, Some(0.022), Some(0.044), Some(0.2)),
-    limit("glare streak 30 px wide", Some(60), 0, 0, Some(0.029), Some(0.024), Some(1.36)),
+    limit("glare streak 30 px wide", Some(70), 0, 0, Some(0.029), Some(0.024), Some(1.36)),
     limit("motion blur 4 px", Some(100), 0, 0, Some(0.02), Some(0.059), Some(0.67)),
     limit("motion blur 8 px", Some(100), 0, 0, Some(0.027), Some(0.095), Some(0.98)),
     limit("motion blur 16 px", Some(100), 6, 0, Some(0.043), Some(0.443), Some(1.2)),

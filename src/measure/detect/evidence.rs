@@ -56,8 +56,8 @@ impl Detector {
     /// at [`FILL_FRACTIONS`] of the ellipse's radius; each is compared with
     /// the mid level of the rim edge nearest in angle (`mids`: angle about
     /// the ellipse's centre, mid level), so that a glare veil or vignetting
-    /// across the disc does not count as light. Saturated samples (glare)
-    /// count neither way. 1 when nothing could be sampled.
+    /// across the disc does not count as light. A direction with a saturated
+    /// sample (glare) counts neither way. 1 when nothing could be sampled.
     pub(super) fn fill_share(
         &self,
         image: &GrayImage,
@@ -76,15 +76,18 @@ impl Detector {
                 continue;
             };
             let (sin, cos) = phi.sin_cos();
-            for f in FILL_FRACTIONS {
+            let samples = FILL_FRACTIONS.map(|f| {
                 let q = [ellipse.cx + f * r * cos, ellipse.cy + f * r * sin];
                 let [u, v] = self.camera.distort_px(q);
-                let Some(value) = rim::sample(image, u, v) else {
-                    continue;
-                };
-                if value >= SATURATED_GRAY {
-                    continue;
-                }
+                rim::sample(image, u, v)
+            });
+            // A direction that runs through saturated pixels looks into a
+            // glare: its other samples lie in the glare's skirt, which
+            // lightens them smoothly, not as a light surface would.
+            if samples.iter().flatten().any(|&v| v >= SATURATED_GRAY) {
+                continue;
+            }
+            for value in samples.into_iter().flatten() {
                 counted += 1;
                 if value < mid {
                     dark += 1;
