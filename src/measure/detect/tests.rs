@@ -179,6 +179,17 @@ fn add_noise(img: &GrayImage, sigma: f64, seed: u64) -> GrayImage {
     })
 }
 
+/// Asserts that ellipse `e` is `truth` to within `centre_px` (its centre)
+/// and `axes_px` (each semi-axis).
+fn assert_near(e: &Ellipse, truth: &Ellipse, centre_px: f64, axes_px: f64) {
+    let centre = (e.cx - truth.cx).hypot(e.cy - truth.cy);
+    assert!(centre < centre_px, "centre off by {centre} px: {e:?}");
+    assert!(
+        (e.a - truth.a).abs() < axes_px && (e.b - truth.b).abs() < axes_px,
+        "{e:?} for {truth:?}"
+    );
+}
+
 /// Plain least-squares ellipse of the rim points (no trimming), to test the
 /// points themselves.
 fn fit_points(c: &RimCandidate) -> Ellipse {
@@ -392,13 +403,7 @@ fn a_motion_blurred_disc_is_found_and_its_rim_is_unbiased() {
     let (s, c) = 30f64.to_radians().sin_cos();
     let img = motion_blur(&sharp, 24.0 * c, 24.0 * s, 48);
     let cand = detector(&cam).detect(&img, None).expect("detected");
-    let e = fit_points(&cand);
-    let centre = (e.cx - truth.cx).hypot(e.cy - truth.cy);
-    assert!(centre < 1.0, "centre off by {centre} px: {e:?}");
-    assert!(
-        (e.a - truth.a).abs() < 1.5 && (e.b - truth.b).abs() < 1.5,
-        "{e:?}"
-    );
+    assert_near(&fit_points(&cand), &truth, 1.0, 1.5);
 }
 
 #[test]
@@ -927,13 +932,7 @@ fn a_disc_under_a_wide_glare_streak_is_found() {
     let sharp = Scene::new(truth).render(w, h, 2.0, 41);
     let img = add_glare_streak(&sharp, [truth.cx, truth.cy], 0.8, 30.0, 400.0);
     let cand = detector(&cam).detect(&img, None).expect("detected");
-    let e = cand.ellipse_px;
-    let centre = (e.cx - truth.cx).hypot(e.cy - truth.cy);
-    assert!(centre < 0.5, "centre off by {centre} px: {e:?}");
-    assert!(
-        (e.a - truth.a).abs() < 0.5 && (e.b - truth.b).abs() < 0.5,
-        "{e:?}"
-    );
+    assert_near(&cand.ellipse_px, &truth, 0.5, 0.5);
 }
 
 /// An overexposed canopy (saturated all round the disc) does not make its
