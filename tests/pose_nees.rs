@@ -26,9 +26,10 @@
 //! reference sets against the true centre throughout.
 //!
 //! Open (printed by the example, not held here): the probe touching the rim
-//! (`probe occlusion 0-10 %`, median 6.7; the probe's outline displaces the
-//! rim points next to it), 30-40 % of the rim hidden (median 3.9 but 27 %
-//! above 11.34) and blur beyond 20 px (most detections there are gross).
+//! (`probe occlusion 0-10 %`, median 4.5; the probe's outline displaces the
+//! rim points next to it), 30-40 % of the rim hidden (median 2.7, 10 %
+//! above 11.34: 27 % before the fit was tried without runs of the probe's
+//! outline) and blur beyond 20 px (most detections there are gross).
 
 mod nees;
 

@@ -24,7 +24,7 @@
 
 use super::algorithm1::draw_subset_ellipses;
 use super::cluster::agglomerate;
-use super::{FitConfig, FitError, Points, geometric, taubin};
+use super::{FitConfig, FitError, Points, geometric, guard, taubin};
 use crate::measure::ellipse::Ellipse;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -105,6 +105,16 @@ fn support(pts: &[[f64; 2]], e: &Ellipse, band: f64) -> usize {
     pts.iter()
         .filter(|p| conic.within_sampson(p[0], p[1], band))
         .count()
+}
+
+/// MSAC cost of `e` on the points: the sum of squared (first-order)
+/// residuals, each capped at `band` squared.
+fn truncated_cost(pts: &[[f64; 2]], e: &Ellipse, band: f64) -> f64 {
+    let conic = e.to_conic();
+    let cap = band * band;
+    pts.iter()
+        .map(|p| conic.sampson_distance_sq(p[0], p[1]).min(cap))
+        .sum()
 }
 
 /// What stages 2-3 computed in earlier rounds of subsets, by class centre:
@@ -291,15 +301,64 @@ pub(crate) fn fit(
     };
     let winner = winner.ok_or(FitError::NoEllipse)?;
 
-    // 4. The winner on all points: Taubin rounds until the inlier set is
-    // stable (cheap), then the geometric refit of that set; if its band
-    // then selects other points, one more geometric refit.
     let Scratch {
         residual_sq,
         sorted,
         ..
     } = &mut scratch;
-    let (mut model, mut band) = (winner.model, winner.band);
+    let (mut model, mut inliers, band) = refit_on_all(
+        xy,
+        winner.model,
+        winner.band,
+        cfg,
+        min_band,
+        residual_sq,
+        sorted,
+    )
+    .ok_or(FitError::NoEllipse)?;
+
+    // 5. A short inlier run cut off by hidden stretches on both sides may be
+    // an occluder's outline the fit has bent towards (see `guard`): the fit
+    // without it, refitted on all points, replaces this one when it has the
+    // lower truncated cost within the tighter of the two bands. A count of
+    // points within the band cannot tell them apart: both bands are often
+    // at the pixel floor, which both fits' points are well within.
+    let isolated = guard::isolated_inlier_runs(xy, [model.cx, model.cy], &inliers);
+    if isolated.iter().any(|&f| f) {
+        let selected: Vec<[f64; 2]> = xy
+            .iter()
+            .zip(inliers.iter().zip(&isolated))
+            .filter(|(_, (k, f))| **k && !**f)
+            .map(|(p, _)| *p)
+            .collect();
+        let start = geometric::refine(&selected, &model, cfg.geometric_iterations);
+        let alternative = (selected.len() >= 5 && plausible(&start))
+            .then(|| refit_on_all(xy, start, band, cfg, min_band, residual_sq, sorted))
+            .flatten();
+        if let Some((alt_model, alt_inliers, alt_band)) = alternative {
+            let common = band.min(alt_band);
+            if truncated_cost(xy, &alt_model, common) < truncated_cost(xy, &model, common) {
+                model = alt_model;
+                inliers = alt_inliers;
+            }
+        }
+    }
+    Ok((model, inliers))
+}
+
+/// Stage 4, a model on all points: Taubin rounds from `model` until the
+/// inlier set is stable (cheap), then the geometric refit of that set; if
+/// its band then selects other points, one more geometric refit. Returns
+/// the model, its inliers and its final band (`None` under 5 inliers).
+fn refit_on_all(
+    xy: &[[f64; 2]],
+    mut model: Ellipse,
+    mut band: f64,
+    cfg: &FitConfig,
+    min_band: f64,
+    residual_sq: &mut Vec<f64>,
+    sorted: &mut Vec<f64>,
+) -> Option<(Ellipse, Vec<bool>, f64)> {
     let mut keep = vec![false; xy.len()];
     residuals_sq(xy, &model, residual_sq);
     let mut count = select(residual_sq, band, &mut keep);
@@ -346,8 +405,7 @@ pub(crate) fn fit(
         }
         std::mem::swap(&mut keep, &mut next);
     }
-    let inliers = used.ok_or(FitError::NoEllipse)?;
-    Ok((model, inliers))
+    used.map(|inliers| (model, inliers, band))
 }
 
 #[cfg(test)]

@@ -1,4 +1,5 @@
-//! Rim points beside a hidden stretch of the rim.
+//! Rim points beside a hidden stretch of the rim, and short runs of
+//! "rim" points cut off by hidden stretches.
 //!
 //! Where the probe, the hose or a glare streak hides part of the rim, the
 //! rays there find no edge or the occluder's outline (the fit's outliers).
@@ -8,6 +9,11 @@
 //! fraction of a pixel: too little to make it an outlier, and of one sign
 //! at each end of the stretch, so it does not average out. Dropping the
 //! point on each side of every hidden stretch removes that pull.
+//!
+//! Where the occluder's outline comes within a few pixels of the rim, a
+//! short stretch of it can pass as rim and bend the fit, which then leaves
+//! the true rim points beside it out: [`isolated_inlier_runs`] names the
+//! runs a fit should be tried without.
 
 /// An angular gap between neighbouring points wider than this many times
 /// the median gap is a hidden stretch (rays that found no edge).
@@ -28,41 +34,22 @@ pub(crate) fn beside_hidden_rim(
     inliers: &[bool],
 ) -> Vec<bool> {
     let mut flagged = vec![false; points.len()];
-    let mut order: Vec<(f64, usize)> = points
-        .iter()
-        .enumerate()
-        .filter(|(i, p)| p.iter().all(|v| v.is_finite()) && *i < inliers.len())
-        .map(|(i, p)| ((p[1] - centre[1]).atan2(p[0] - centre[0]), i))
-        .collect();
-    let m = order.len();
-    if m < 8 {
+    let Some(rim) = RimOrder::new(points, centre, inliers) else {
         return flagged;
-    }
-    order.sort_by(|a, b| a.0.total_cmp(&b.0));
-    // Gap from point j to the next one round the rim.
-    let gaps: Vec<f64> = (0..m)
-        .map(|j| (order[(j + 1) % m].0 - order[j].0).rem_euclid(std::f64::consts::TAU))
-        .collect();
-    let mut sorted = gaps.clone();
-    sorted.sort_by(f64::total_cmp);
-    let wide = HIDDEN_GAP_FACTOR * sorted[m / 2];
-    let outlier = |j: usize| !inliers[order[j % m].1];
-    // Whether the point at j is in a run of MIN_OUTLIER_RUN outliers.
-    let in_run = |j: usize| {
-        (0..MIN_OUTLIER_RUN).any(|start| (0..MIN_OUTLIER_RUN).all(|k| outlier(j + m + k - start)))
     };
+    let m = rim.order.len();
     let mut flag = |j: usize| {
-        let i = order[j % m].1;
+        let i = rim.order[j % m].1;
         if inliers[i] {
             flagged[i] = true;
         }
     };
-    for (j, &gap) in gaps.iter().enumerate() {
-        if gap > wide {
+    for (j, &gap) in rim.gaps.iter().enumerate() {
+        if gap > rim.wide {
             flag(j);
             flag(j + 1);
         }
-        if outlier(j) && in_run(j) {
+        if rim.outlier(j) && rim.in_outlier_run(j) {
             flag(j + m - 1);
             flag(j + 1);
         }
@@ -70,6 +57,113 @@ pub(crate) fn beside_hidden_rim(
     flagged
 }
 
+/// An inlier run holding less than this share of the inliers, cut off from
+/// the rest by hidden stretches on both sides, is suspect (see
+/// [`isolated_inlier_runs`]).
+const ISOLATED_RUN_SHARE: f64 = 0.25;
+
+/// Flags the inliers of every short run (under [`ISOLATED_RUN_SHARE`] of
+/// the inliers) that hidden stretches cut off from the rest of the rim on
+/// both sides. Such a run is often an occluder's outline that happens to
+/// lie near the rim: the bottom of the probe's silhouette, a pixel or two
+/// outside it, which a fit can bend towards while the true rim points
+/// beside it fall out of its band. It may also be true rim seen between
+/// two occluders, so the caller tries the fit without it and keeps
+/// whichever explains more points. Nothing is flagged while the inliers
+/// form one run.
+pub(crate) fn isolated_inlier_runs(
+    points: &[[f64; 2]],
+    centre: [f64; 2],
+    inliers: &[bool],
+) -> Vec<bool> {
+    let mut flagged = vec![false; points.len()];
+    let Some(rim) = RimOrder::new(points, centre, inliers) else {
+        return flagged;
+    };
+    let m = rim.order.len();
+    // A hidden stretch follows point j: a wide gap, or a run of outliers.
+    let break_after =
+        |j: usize| rim.gaps[j % m] > rim.wide || (rim.outlier(j + 1) && rim.in_outlier_run(j + 1));
+    let Some(start) = (0..m).find(|&j| break_after(j)) else {
+        return flagged;
+    };
+    let mut runs: Vec<Vec<usize>> = Vec::new();
+    let mut current = Vec::new();
+    for j in start + 1..=start + m {
+        if !rim.outlier(j) {
+            current.push(rim.order[j % m].1);
+        }
+        if break_after(j) && !current.is_empty() {
+            runs.push(std::mem::take(&mut current));
+        }
+    }
+    if runs.len() < 2 {
+        return flagged;
+    }
+    let total: usize = runs.iter().map(Vec::len).sum();
+    for run in runs
+        .iter()
+        .filter(|r| (r.len() as f64) < ISOLATED_RUN_SHARE * total as f64)
+    {
+        for &i in run {
+            flagged[i] = true;
+        }
+    }
+    flagged
+}
+
+/// The finite points in angular order about a centre, with the gaps
+/// between neighbours and the inlier flags.
+struct RimOrder<'a> {
+    /// (angle, index into the points), by angle.
+    order: Vec<(f64, usize)>,
+    /// Gap from the j-th point to the next one round the rim, radians.
+    gaps: Vec<f64>,
+    /// A gap wider than this is a hidden stretch.
+    wide: f64,
+    inliers: &'a [bool],
+}
+
+impl<'a> RimOrder<'a> {
+    /// `None` under 8 points: too few to tell a stretch from noise.
+    fn new(points: &[[f64; 2]], centre: [f64; 2], inliers: &'a [bool]) -> Option<Self> {
+        let mut order: Vec<(f64, usize)> = points
+            .iter()
+            .enumerate()
+            .filter(|(i, p)| p.iter().all(|v| v.is_finite()) && *i < inliers.len())
+            .map(|(i, p)| ((p[1] - centre[1]).atan2(p[0] - centre[0]), i))
+            .collect();
+        let m = order.len();
+        if m < 8 {
+            return None;
+        }
+        order.sort_by(|a, b| a.0.total_cmp(&b.0));
+        let gaps: Vec<f64> = (0..m)
+            .map(|j| (order[(j + 1) % m].0 - order[j].0).rem_euclid(std::f64::consts::TAU))
+            .collect();
+        let mut sorted = gaps.clone();
+        sorted.sort_by(f64::total_cmp);
+        let wide = HIDDEN_GAP_FACTOR * sorted[m / 2];
+        Some(Self {
+            order,
+            gaps,
+            wide,
+            inliers,
+        })
+    }
+
+    /// Whether the j-th point (round the rim, any j) is an outlier.
+    fn outlier(&self, j: usize) -> bool {
+        !self.inliers[self.order[j % self.order.len()].1]
+    }
+
+    /// Whether the j-th point is in a run of [`MIN_OUTLIER_RUN`] outliers.
+    fn in_outlier_run(&self, j: usize) -> bool {
+        let m = self.order.len();
+        (0..MIN_OUTLIER_RUN)
+            .any(|start| (0..MIN_OUTLIER_RUN).all(|k| self.outlier(j + m + k - start)))
+    }
+}
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -133,5 +227,50 @@ mod tests {
         }
         let at = flagged_angles(&pts, &inliers);
         assert_eq!(at, vec![195, 215]);
+    }
+
+    /// The angles (degrees) of the points in isolated inlier runs, in order.
+    fn isolated_angles(pts: &[[f64; 2]], inliers: &[bool]) -> Vec<i32> {
+        let flagged = isolated_inlier_runs(pts, [100.0, 100.0], inliers);
+        let mut at: Vec<i32> = pts
+            .iter()
+            .zip(&flagged)
+            .filter(|(_, f)| **f)
+            .map(|(p, _)| angle_of(*p))
+            .collect();
+        at.sort_unstable();
+        at
+    }
+
+    fn outliers_at(pts: &[[f64; 2]], hidden: &[std::ops::RangeInclusive<i32>]) -> Vec<bool> {
+        pts.iter()
+            .map(|p| !hidden.iter().any(|r| r.contains(&angle_of(*p))))
+            .collect()
+    }
+
+    #[test]
+    fn a_short_run_between_hidden_stretches_is_isolated() {
+        // The probe's outline at 200-260 degrees, with a short run of
+        // inliers (its concave bottom) at 225-235; a gap at 265-340.
+        let mut pts = arc(0, 265, 5);
+        pts.extend(arc(340, 360, 5));
+        let inliers = outliers_at(&pts, &[200..=220, 240..=260]);
+        assert_eq!(isolated_angles(&pts, &inliers), vec![225, 230, 235]);
+    }
+
+    #[test]
+    fn one_run_or_long_runs_are_not_isolated() {
+        // One hidden stretch (outliers, then a gap): one run.
+        let mut pts = arc(0, 300, 5);
+        pts.extend(arc(340, 360, 5));
+        let inliers = outliers_at(&pts, &[280..=295]);
+        assert!(isolated_angles(&pts, &inliers).is_empty());
+        // Two stretches cutting the rim into halves: both runs are long.
+        let pts = arc(0, 360, 5);
+        let inliers = outliers_at(&pts, &[80..=100, 260..=280]);
+        assert!(isolated_angles(&pts, &inliers).is_empty());
+        // A lone outlier does not cut the rim.
+        let inliers = outliers_at(&pts, &[45..=45, 260..=280]);
+        assert!(isolated_angles(&pts, &inliers).is_empty());
     }
 }
