@@ -21,6 +21,9 @@
 //! 4. The winner on all points: rounds of inlier selection and
 //!    orthogonal-distance (geometric) refinement, the band at k robust
 //!    sigmas (never below a pixel floor), until the inlier set is stable.
+//! 5. A short run of inliers cut off by hidden stretches on both sides (an
+//!    occluder's outline near the rim, see `guard`) is tried without: the
+//!    refit on all points replaces the winner when it fits them better.
 
 use super::algorithm1::draw_subset_ellipses;
 use super::cluster::agglomerate;

@@ -69,8 +69,8 @@ const ISOLATED_RUN_SHARE: f64 = 0.25;
 /// outside it, which a fit can bend towards while the true rim points
 /// beside it fall out of its band. It may also be true rim seen between
 /// two occluders, so the caller tries the fit without it and keeps
-/// whichever explains more points. Nothing is flagged while the inliers
-/// form one run.
+/// whichever fits the points better (`adaptive`, stage 5). Nothing is
+/// flagged while the inliers form one run.
 pub(crate) fn isolated_inlier_runs(
     points: &[[f64; 2]],
     centre: [f64; 2],
