@@ -32,12 +32,13 @@ const EDGE_SEEDS: usize = 4;
 /// taken out ([`super::edges::EdgeVoter::nested`]), tried when no candidate
 /// verified at all.
 const NESTED_SEEDS: usize = 2;
-/// A nested circle's first ray pass looks from this share of its radius
-/// to this many radii: its radius is measured from its own rim (to a
-/// decimated pixel or two), and the rim inside it is the smaller circle's,
-/// tried before.
-const NESTED_SEED_FROM: f64 = 0.5;
-const NESTED_SEED_REACH: f64 = 2.0;
+/// A first ray pass that looks for an edge circle's own rim, past whatever
+/// lies inside it, starts at this share of its radius and reaches this
+/// many radii: the radius is measured from the circle's own rim (to a
+/// decimated pixel or two). A nested circle's inside is the smaller
+/// circle's rim, tried before; a disc's can be the probe's tip.
+const OWN_RIM_FROM: f64 = 0.5;
+const OWN_RIM_REACH: f64 = 2.0;
 
 /// Regions of the locally normalised frame verified per frame (over all
 /// its windows), whole and round ones first, then larger first.
@@ -85,7 +86,8 @@ pub(super) struct Seed {
     /// disc looked for inside a verified ellipse (see
     /// [`Detector::prefer_inner_disc`]); 5-7 as 0-2, of a region of the
     /// locally normalised frame ([`Detector::try_local_contrast`]); 8 a
-    /// circle of the edge source nested with a stronger one.
+    /// circle of the edge source nested with a stronger one; 9 a circle of
+    /// the edge source looked for past what lies inside it.
     pub(super) kind: u8,
 }
 
@@ -295,12 +297,34 @@ impl Detector {
             if verified.is_empty() {
                 let nested = self.voter.nested(&self.decimated, &circles, NESTED_SEEDS);
                 let around = EdgeSeeds {
-                    reach: NESTED_SEED_REACH,
-                    from: NESTED_SEED_FROM,
+                    reach: OWN_RIM_REACH,
+                    from: OWN_RIM_FROM,
                     kind: 8,
                     stream: 1500,
                 };
                 self.try_edge_circles(image, &nested, around, accept, &mut tried, &mut verified);
+            }
+            // The first circles again, their first pass starting past
+            // what lies inside them, when still none verified: the
+            // probe's tip over the middle of a hazed disc is darker than
+            // the disc, its outline the strongest step from any point
+            // inside, and the tip is dropped as a circle inside a larger
+            // dark shape ([`super::Reject::Nested`]).
+            if verified.is_empty() {
+                let past_inside = EdgeSeeds {
+                    reach: OWN_RIM_REACH,
+                    from: OWN_RIM_FROM,
+                    kind: 9,
+                    stream: 1700,
+                };
+                self.try_edge_circles(
+                    image,
+                    &circles,
+                    past_inside,
+                    accept,
+                    &mut tried,
+                    &mut verified,
+                );
             }
         }
         // The third source, when neither gave a clear drogue: dark regions
