@@ -69,7 +69,9 @@ const fn limit(
 /// one of them wrong (a disc cut by a glare streak and the probe, its left
 /// part taken for the disc with 63 % canopy evidence): counted here. It
 /// found its last disc (90 -> 100 %) when the edge source's circles were
-/// looked for again past what lies inside them (fourteenth session).
+/// looked for again past what lies inside them, and lost its wrong one
+/// (the false count 3 -> 2) when steps into glare stopped giving rim
+/// points (fourteenth session).
 #[rustfmt::skip]
 const LIMITS: &[Limit] = &[
     //    level                                  detected %  false  wrong  centre px     position %    normal deg
@@ -114,7 +116,7 @@ const LIMITS: &[Limit] = &[
     limit("probe occlusion 30-40 %", Some(100), 0, 0, Some(0.04), Some(0.026), Some(0.32)),
     limit("distractors 1", Some(100), 0, 0, Some(0.013), Some(0.029), Some(0.17)),
     limit("distractors 3", Some(100), 0, 0, Some(0.017), Some(0.024), Some(0.17)),
-    limit("everything", Some(100), 3, 1, Some(0.061), Some(0.14), Some(0.56)),
+    limit("everything", Some(100), 2, 0, Some(0.061), Some(0.14), Some(0.56)),
     limit("no drogue: crescent", None, 0, 0, None, None, None),
     limit("no drogue: disc without canopy", None, 0, 0, None, None, None),
     limit("no drogue: ring without canopy", None, 0, 0, None, None, None),

@@ -173,6 +173,12 @@ pub(super) fn glare_on_light_side(p: &[f32], s_min: f64, step: f64, e: &rim::Ray
     p[from..=to].iter().any(|&v| v >= SATURATED_GRAY)
 }
 
+/// Removes the items of `v` whose flag in `marked` (aligned with it) is set.
+fn drop_marked<T>(v: &mut Vec<T>, marked: &[bool]) {
+    let mut flags = marked.iter();
+    v.retain(|_| !flags.next().copied().unwrap_or(false));
+}
+
 /// Whether `b` is the rim `a` to within [`SAME_RIM`] of its size (centre
 /// and axes): a narrow pass around either meets the same edges (its window
 /// is [`DetectConfig::rim_search_fraction`](super::DetectConfig) of the
@@ -369,6 +375,7 @@ impl Detector {
         let mut faint = Vec::new();
         let mut rays_in_image;
         let mut clipped_share;
+        let mut glares: Vec<bool>;
         loop {
             points_px = Vec::with_capacity(rays);
             undistorted = Vec::with_capacity(rays);
@@ -380,6 +387,7 @@ impl Detector {
             mid_levels = Vec::with_capacity(rays);
             widths = Vec::with_capacity(rays);
             rays_in_image = 0usize;
+            glares = Vec::with_capacity(rays);
             let mut clipped = 0usize;
             let (sin_theta, cos_theta) = start.theta.sin_cos();
             for dir in ray_directions(rays) {
@@ -458,8 +466,8 @@ impl Detector {
                 if let Some(mut e) = found {
                     // A step into saturated pixels is most likely the skirt
                     // of a glare streak lying over the disc: its width says
-                    // nothing of blur. (Its point stays: the robust fit
-                    // drops it when it is off the rim.)
+                    // nothing of blur, and unless most steps are such, it
+                    // gives no rim point (below).
                     let raw = if half > 0 {
                         &self.raw_profile
                     } else {
@@ -493,6 +501,7 @@ impl Detector {
                     let spread = self.smoothing_spread_px[half];
                     widths.push((2.0 * (e.light_s - e.s) - spread).max(0.0));
                     clipped += usize::from(e.clipped && !glare);
+                    glares.push(glare);
                 }
             }
             tracing::trace!(
@@ -508,6 +517,29 @@ impl Detector {
                 break;
             }
             widen *= WIDEN_STEP;
+        }
+        // Steps into saturated pixels (a glare streak over the disc) give
+        // no rim points and do not count against the candidate, unless
+        // they are most of the rim (an overexposed canopy).
+        let glared = glares.iter().filter(|&&g| g).count();
+        // Their mid levels still say where the disc's inside is dark: the
+        // glare's skirt lifts the disc's levels beside the streak.
+        let mut glare_mids: Vec<([f64; 2], f32)> = Vec::new();
+        if glared > 0 && 2 * glared < glares.len() {
+            glare_mids = (0..glares.len())
+                .filter(|&i| glares[i])
+                .map(|i| (undistorted[i], mid_levels[i]))
+                .collect();
+            drop_marked(&mut points_px, &glares);
+            drop_marked(&mut undistorted, &glares);
+            drop_marked(&mut contrasts, &glares);
+            drop_marked(&mut mid_levels, &glares);
+            drop_marked(&mut widths, &glares);
+            if rim_use == RimUse::Measure {
+                drop_marked(&mut measured_base, &glares);
+                drop_marked(&mut shading, &glares);
+            }
+            rays_in_image -= glared;
         }
         if rays_in_image < rays / 4 {
             return Err(Reject::OutOfImage);
@@ -558,7 +590,13 @@ impl Detector {
                 (angle, mid_levels[i])
             })
             .collect();
-        let fill = self.fill_share(image, &ellipse, &mids);
+        let mut fill_mids = mids.clone();
+        fill_mids.extend(
+            glare_mids
+                .iter()
+                .map(|&(p, mid)| ((p[1] - ellipse.cy).atan2(p[0] - ellipse.cx), mid)),
+        );
+        let fill = self.fill_share(image, &ellipse, &fill_mids);
         if fill < self.cfg.min_fill {
             return Err(Reject::LightInside(fill));
         }
