@@ -265,6 +265,20 @@ pub fn run_level(
     stats
 }
 
+/// The measurement of frame `index` of `level` (seed `seed`), on its own,
+/// and the simulator's truth for it.
+pub fn measure_one(seed: u64, level: &Level, index: u64) -> (Measurement, Option<DrogueTruth>) {
+    let f = Sweep::new(seed).frame(level, index);
+    let mut measurers = Measurers::default();
+    let m = measurers.for_camera(&f.camera).measure(&Frame {
+        seq: index,
+        capture_time_ns: 0,
+        image: f.image,
+        origin: FrameOrigin::File(PathBuf::from(format!("sweep/{}/{index}", level.label()))),
+    });
+    (m, f.drogue)
+}
+
 /// Every level, `frames` frames each (written to `dump` when given).
 pub fn run(
     levels: &[Level],

@@ -219,7 +219,11 @@ struct Verified {
 /// `drogue_vision::measure::detect` target), one line per candidate.
 #[derive(Clone, Copy, Debug, PartialEq)]
 enum Reject {
-    /// Fewer rays than needed found an edge (wide pass or narrow pass).
+    /// The first (wide) pass found an edge on fewer than 8 of its rays:
+    /// nothing round to fit around the seed (a vignetted corner, a cloud's
+    /// soft shadow).
+    NoRim(usize),
+    /// Fewer rays than needed found an edge on the narrow pass.
     FewEdges(usize),
     /// Most of the narrow pass's rays leave the image.
     OutOfImage,

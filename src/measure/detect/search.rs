@@ -4,7 +4,7 @@
 
 use super::coarse::{self, Blob};
 use super::edges::EdgeCircle;
-use super::{Detector, Verified};
+use super::{Detector, Reject, Verified};
 use image::GrayImage;
 
 /// Wide-pass reach of seeds whose radius is not a rim's (the deepest
@@ -162,6 +162,36 @@ fn region_seeds(b: &Blob, round: bool, kind_offset: u8) -> Vec<Seed> {
     seeds
 }
 
+/// The blobs of up to `budget` regions of `blobs` (sorted by region, larger
+/// regions first), from index `from`: each region's largest part at each
+/// threshold. Returns their indices and the index where the next region
+/// begins.
+fn select_regions(blobs: &[Blob], from: usize, budget: usize) -> (Vec<usize>, usize) {
+    let mut selected: Vec<usize> = Vec::new();
+    let mut regions = 0usize;
+    for i in from..blobs.len() {
+        let b = &blobs[i];
+        let new_region = i == from || blobs[i - 1].region != b.region;
+        if new_region {
+            if regions >= budget {
+                return (selected, i);
+            }
+            regions += 1;
+        }
+        let same_region = |k: &usize| blobs[*k].region == b.region;
+        if selected
+            .iter()
+            .rev()
+            .take_while(|k| same_region(k))
+            .any(|&k| blobs[k].level == b.level)
+        {
+            continue;
+        }
+        selected.push(i);
+    }
+    (selected, blobs.len())
+}
+
 impl Detector {
     /// The candidates of all three sources, verified on the sparse rim, in the
     /// order tried; the search ends at the first that scores `accept`.
@@ -195,82 +225,96 @@ impl Detector {
                 .then(y.area.cmp(&x.area))
         });
         // The budget: the regions, and within each its largest part at
-        // each threshold.
-        let mut selected: Vec<usize> = Vec::new();
-        let mut regions = 0usize;
-        for i in 0..blobs.len() {
-            let b = &blobs[i];
-            let new_region = i == 0 || blobs[i - 1].region != b.region;
-            if new_region {
-                if regions >= self.cfg.max_candidates as usize {
-                    break;
-                }
-                regions += 1;
-            }
-            let same_region = |k: &usize| blobs[*k].region == b.region;
-            if selected
-                .iter()
-                .rev()
-                .take_while(|k| same_region(k))
-                .any(|&k| blobs[k].level == b.level)
-            {
-                continue;
-            }
-            selected.push(i);
-        }
-        // Verified in order of how disc-like their moments are (whole and
-        // round first, the rest as they were), so that a clear view of the
-        // drogue ends the search before the probe and hose are looked at.
-        // The stable sort keeps the size order within each group.
-        let round: Vec<bool> = selected
-            .iter()
-            .map(|&i| blobs[i].whole_and_round(&self.decimated, self.cfg.min_axis_ratio))
-            .collect();
-        let mut order: Vec<usize> = (0..selected.len()).collect();
-        order.sort_by_key(|&k| !round[k]);
+        // each threshold. A region whose rays find no step at all (a
+        // vignetted corner, a cloud's soft shadow: every seed `NoRim`) is
+        // no candidate: it gives its place to the next region in size
+        // order, so that such regions cannot use up the budget before a
+        // disc (or the part of it a glare streak leaves) is tried.
         let mut kept: Vec<Blob> = Vec::new();
         let mut verified: Vec<Verified> = Vec::new();
         let mut tried: Vec<Seed> = Vec::new();
-        'blobs: for &k in &order {
-            let index = selected[k];
-            // The deepest and best-ringed points cost a distance transform
-            // of the region: only for the blobs that get this far.
-            self.finder
-                .describe_core(&self.decimated, &mut blobs[index]);
-            let b = &blobs[index];
-            // Drop near-duplicates (the same region at several thresholds).
-            let dup = kept.iter().any(|k| {
-                let near = |p: [f64; 2], q: [f64; 2], r: f64| (p[0] - q[0]).hypot(p[1] - q[1]) < r;
-                let r = 0.25 * k.b_px.min(b.b_px);
-                near(k.centre_px, b.centre_px, r)
-                    && near(k.core_px, b.core_px, r)
-                    && near(k.ringed_px, b.ringed_px, r)
-                    && (k.a_px / b.a_px - 1.0).abs() < 0.25
-            });
-            if dup {
-                continue;
+        let mut regions = 0usize;
+        let (mut from, mut budget, mut offset) = (0, self.cfg.max_candidates as usize, 0);
+        let mut refunded = false;
+        'batches: while budget > 0 {
+            let (selected, next) = select_regions(&blobs, from, budget);
+            if selected.is_empty() {
+                break;
             }
-            kept.push(b.clone());
-            let seeds = region_seeds(b, round[k], 0);
-            for seed in &seeds {
-                // The same region at another threshold often gives nearly
-                // the same seed: its rays would find the same edges.
-                if tried.iter().any(|t| t.same_as(seed)) {
+            from = next;
+            let mut batch: Vec<u32> = selected.iter().map(|&i| blobs[i].region).collect();
+            batch.dedup();
+            regions += batch.len();
+            // Verified in order of how disc-like their moments are (whole
+            // and round first, the rest as they were), so that a clear view
+            // of the drogue ends the search before the probe and hose are
+            // looked at. The stable sort keeps the size order within each
+            // group.
+            let round: Vec<bool> = selected
+                .iter()
+                .map(|&i| blobs[i].whole_and_round(&self.decimated, self.cfg.min_axis_ratio))
+                .collect();
+            let mut order: Vec<usize> = (0..selected.len()).collect();
+            order.sort_by_key(|&k| !round[k]);
+            let mut with_rim: Vec<u32> = Vec::new();
+            for &k in &order {
+                let index = selected[k];
+                // The deepest and best-ringed points cost a distance
+                // transform of the region: only for the blobs that get this
+                // far.
+                self.finder
+                    .describe_core(&self.decimated, &mut blobs[index]);
+                let b = &blobs[index];
+                // Drop near-duplicates (the same region at several thresholds).
+                let dup = kept.iter().any(|k| {
+                    let near =
+                        |p: [f64; 2], q: [f64; 2], r: f64| (p[0] - q[0]).hypot(p[1] - q[1]) < r;
+                    let r = 0.25 * k.b_px.min(b.b_px);
+                    near(k.centre_px, b.centre_px, r)
+                        && near(k.core_px, b.core_px, r)
+                        && near(k.ringed_px, b.ringed_px, r)
+                        && (k.a_px / b.a_px - 1.0).abs() < 0.25
+                });
+                if dup {
                     continue;
                 }
-                tried.push(seed.clone());
-                // The seed's random stream is fixed by its blob's place in
-                // the size order and its kind, not by the order of trying.
-                if self.try_seed(
-                    image,
-                    seed,
-                    3 * k as u64 + seed.kind as u64,
-                    accept,
-                    &mut verified,
-                ) {
-                    break 'blobs;
+                kept.push(b.clone());
+                let region = b.region;
+                let seeds = region_seeds(b, round[k], 0);
+                for seed in &seeds {
+                    // The same region at another threshold often gives
+                    // nearly the same seed: its rays would find the same
+                    // edges.
+                    if tried.iter().any(|t| t.same_as(seed)) {
+                        continue;
+                    }
+                    tried.push(seed.clone());
+                    // The seed's random stream is fixed by its blob's place
+                    // in the size order and its kind, not by the order of
+                    // trying.
+                    let stream = 3 * (offset + k) as u64 + seed.kind as u64;
+                    match self.try_seed(image, seed, stream, accept, &mut verified) {
+                        Ok(true) => break 'batches,
+                        Err(Reject::NoRim(_)) => {}
+                        _ => {
+                            if !with_rim.contains(&region) {
+                                with_rim.push(region);
+                            }
+                        }
+                    }
                 }
             }
+            offset += selected.len();
+            // The places of the first regions without a rim go to the next
+            // regions once: a chain of refunds would try every dark region
+            // of the frame, and each region tried is another chance for a
+            // wrong candidate.
+            budget = if refunded {
+                0
+            } else {
+                batch.len() - with_rim.len()
+            };
+            refunded = true;
         }
         // The edge source, when the dark regions gave no clear drogue: a
         // disc merged with the hose, probe or a glare streak, or washed out
@@ -370,7 +414,7 @@ impl Detector {
             }
             tried.push(seed.clone());
             tracing::debug!(strength = c.strength, kind = how.kind, "edge source circle");
-            if self.try_seed(image, &seed, how.stream + i as u64, accept, verified) {
+            if self.try_seed(image, &seed, how.stream + i as u64, accept, verified) == Ok(true) {
                 break;
             }
         }
@@ -450,7 +494,7 @@ impl Detector {
                 }
                 tried.push(seed.clone());
                 let index = 2000 + 3 * i as u64 + u64::from(seed.kind - LOCAL_KIND_OFFSET);
-                if self.try_seed(image, &seed, index, accept, verified) {
+                if self.try_seed(image, &seed, index, accept, verified) == Ok(true) {
                     break 'regions;
                 }
             }
@@ -459,7 +503,7 @@ impl Detector {
 
     /// Verifies a seed (its random stream `index`), keeps it in `verified`
     /// when it passes, and says whether it ends the search (scores
-    /// `accept`).
+    /// `accept`), or why it did not pass.
     fn try_seed(
         &mut self,
         image: &GrayImage,
@@ -467,7 +511,7 @@ impl Detector {
         index: u64,
         accept: f64,
         verified: &mut Vec<Verified>,
-    ) -> bool {
+    ) -> Result<bool, Reject> {
         let r = self.verify_seed(image, seed, index, verified);
         tracing::debug!(
             centre_px = ?[seed.centre_px[0].round(), seed.centre_px[1].round()],
@@ -476,13 +520,10 @@ impl Detector {
             result = ?r.as_ref().map(|v| v.score),
             "candidate"
         );
-        let r = r.map(|v| self.prefer_inner_disc(image, v, index));
-        let Ok(v) = r else {
-            return false;
-        };
+        let v = self.prefer_inner_disc(image, r?, index);
         let ends = v.score >= accept;
         verified.push(v);
-        ends
+        Ok(ends)
     }
 
     /// The canopy's outer rim taken for the disc (under haze its step to

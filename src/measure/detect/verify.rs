@@ -231,7 +231,7 @@ impl Detector {
             }
         }
         if points.len() < 8 {
-            return Err(Reject::FewEdges(points.len()));
+            return Err(Reject::NoRim(points.len()));
         }
         let scale = seed.b_px.max(1.0);
         let tolerance = (0.03 * scale).max(1.0);
