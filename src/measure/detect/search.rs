@@ -225,11 +225,12 @@ impl Detector {
                 .then(y.area.cmp(&x.area))
         });
         // The budget: the regions, and within each its largest part at
-        // each threshold. A region whose rays find no step at all (a
-        // vignetted corner, a cloud's soft shadow: every seed `NoRim`) is
-        // no candidate: it gives its place to the next region in size
-        // order, so that such regions cannot use up the budget before a
-        // disc (or the part of it a glare streak leaves) is tried.
+        // each threshold. The first regions whose rays find no step at all
+        // (a vignetted corner, a cloud's soft shadow: every seed `NoRim`)
+        // are no candidates: they give their places to the next regions in
+        // size order, once (below), so that such regions cannot use up the
+        // budget before a disc (or the part of it a glare streak leaves) is
+        // tried.
         let mut kept: Vec<Blob> = Vec::new();
         let mut verified: Vec<Verified> = Vec::new();
         let mut tried: Vec<Seed> = Vec::new();

@@ -523,7 +523,9 @@ impl Detector {
         // they are most of the rim (an overexposed canopy).
         let glared = glares.iter().filter(|&&g| g).count();
         // Their mid levels still say where the disc's inside is dark: the
-        // glare's skirt lifts the disc's levels beside the streak.
+        // glare's skirt lifts the disc's levels beside the streak. Each is
+        // kept with its point (undistorted pixels) and turned into an angle
+        // about the fitted ellipse for the fill test.
         let mut glare_mids: Vec<([f64; 2], f32)> = Vec::new();
         if glared > 0 && 2 * glared < glares.len() {
             glare_mids = (0..glares.len())
