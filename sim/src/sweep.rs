@@ -2,7 +2,8 @@
 //! (haze, glare streak over the disc, motion blur, noise, exposure,
 //! vignetting, lens distortion, range, tilt, probe occlusion, distractors)
 //! and everything at once, plus drogue-free frames with look-alikes
-//! (crescents, canopy-less discs and rings, dark blobs and rectangles).
+//! (crescents, canopy-less discs and rings, dark blobs and rectangles,
+//! stars and flowers).
 //!
 //! Every frame is an unrelated view with a drogue at a random place in the
 //! field on top of a mild baseline (range 2-8 m, tilt 0-45 degrees, hose,
@@ -73,6 +74,8 @@ pub enum Factor {
     DarkRing,
     /// Drogue-free: dark blobs and rectangles only.
     DarkShapes,
+    /// Drogue-free: dark stars and flowers (rounded arms joined at a body).
+    DarkStars,
 }
 
 impl Factor {
@@ -96,6 +99,7 @@ impl Factor {
             Factor::CanopylessDisc => "no drogue: disc without canopy",
             Factor::DarkRing => "no drogue: ring without canopy",
             Factor::DarkShapes => "no drogue: dark blobs, rectangles",
+            Factor::DarkStars => "no drogue: stars, flowers",
         }
     }
 
@@ -103,7 +107,11 @@ impl Factor {
     pub fn has_drogue(self) -> bool {
         !matches!(
             self,
-            Factor::Crescent | Factor::CanopylessDisc | Factor::DarkRing | Factor::DarkShapes
+            Factor::Crescent
+                | Factor::CanopylessDisc
+                | Factor::DarkRing
+                | Factor::DarkShapes
+                | Factor::DarkStars
         )
     }
 }
@@ -155,8 +163,8 @@ impl Level {
 /// then the drogue-free kinds.
 pub fn standard_levels() -> Vec<Level> {
     use Factor::{
-        Baseline, Blur, CanopylessDisc, Crescent, DarkRing, DarkShapes, Distortion, Distractors,
-        Everything, Exposure, Glare, Haze, Noise, Occlusion, Range, Tilt, Vignetting,
+        Baseline, Blur, CanopylessDisc, Crescent, DarkRing, DarkShapes, DarkStars, Distortion,
+        Distractors, Everything, Exposure, Glare, Haze, Noise, Occlusion, Range, Tilt, Vignetting,
     };
     let mut levels = vec![Level::new(Baseline, 0.0)];
     let mut add = |f: Factor, values: &[f64]| {
@@ -178,6 +186,7 @@ pub fn standard_levels() -> Vec<Level> {
     add(CanopylessDisc, &[0.0]);
     add(DarkRing, &[0.0]);
     add(DarkShapes, &[0.0]);
+    add(DarkStars, &[0.0]);
     levels
 }
 
@@ -444,12 +453,7 @@ fn settings(level: &Level, rng: &mut ChaCha8Rng) -> Settings {
             s.distortion = [-0.25, 0.08, 0.0, 0.0, 0.0];
             s.range_m = rng.random_range(2.0..10.0);
             s.tilt_deg = rng.random_range(0.0..60.0);
-            s.read_noise_dn = rng.random_range(2.0..8.0);
-            s.gain = rng.random_range(0.4..1.3);
-            s.vignette = rng.random_range(0.1..0.5);
-            if rng.random_bool(0.5) {
-                s.haze = rng.random_range(0.3..0.6);
-            }
+            harsh_imaging(&mut s, rng);
             if rng.random_bool(0.5) {
                 s.blur_px = rng.random_range(3.0..15.0);
             }
@@ -464,6 +468,12 @@ fn settings(level: &Level, rng: &mut ChaCha8Rng) -> Settings {
                 s.distractors = 1;
             }
         }
+        // Arms among noise and haze: where a chance edge is most often
+        // taken for the canopy's rim.
+        Factor::DarkStars => {
+            s.distortion = [-0.25, 0.08, 0.0, 0.0, 0.0];
+            harsh_imaging(&mut s, rng);
+        }
         Factor::Baseline
         | Factor::Crescent
         | Factor::CanopylessDisc
@@ -471,6 +481,17 @@ fn settings(level: &Level, rng: &mut ChaCha8Rng) -> Settings {
         | Factor::DarkShapes => {}
     }
     s
+}
+
+/// The `everything` level's imaging: read noise 2-8 DN, gain 0.4-1.3,
+/// vignetting 0.1-0.5 and, half the time, haze 0.3-0.6.
+fn harsh_imaging(s: &mut Settings, rng: &mut ChaCha8Rng) {
+    s.read_noise_dn = rng.random_range(2.0..8.0);
+    s.gain = rng.random_range(0.4..1.3);
+    s.vignette = rng.random_range(0.1..0.5);
+    if rng.random_bool(0.5) {
+        s.haze = rng.random_range(0.3..0.6);
+    }
 }
 
 #[cfg(test)]

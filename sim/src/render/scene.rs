@@ -146,6 +146,21 @@ pub enum DecalShape {
         /// Turn of the wobble pattern, radians.
         phase: f64,
     },
+    /// A star or flower of `arms` rounded arms: radius
+    /// `radius * (1 - depth * (1 - cos(arms * (phi - phase))) / 2)`, the
+    /// arms' tips at `radius`, the waists between them at
+    /// `radius * (1 - depth)`. An arm's tip is a dark rounded end joined to
+    /// other dark arms: a disc-like candidate whose surround is partly dark.
+    Star {
+        /// Radius at the arms' tips, metres.
+        radius: f64,
+        /// Number of arms (at least 2).
+        arms: u32,
+        /// Depth of the waists, 0..1.
+        depth: f64,
+        /// Direction of the first arm, radians.
+        phase: f64,
+    },
 }
 
 /// A flat, uniformly bright shape in the camera frame (plane through
@@ -206,12 +221,13 @@ impl Decal {
             DecalShape::Ring { outer, .. } => outer,
             DecalShape::Rect { half_1, half_2 } => half_1.hypot(half_2),
             DecalShape::Blob { radius, wobble, .. } => radius * (1.0 + wobble.abs()),
+            DecalShape::Star { radius, .. } => radius,
         }
     }
 
     /// Signed distance (metres, negative inside) of the in-plane point
-    /// (x, y) to the outline (for `Blob` the radial distance, close enough
-    /// for anti-aliasing).
+    /// (x, y) to the outline (for `Blob` and `Star` the radial distance,
+    /// close enough for anti-aliasing).
     pub(super) fn signed_distance(&self, x: f64, y: f64) -> f64 {
         match self.shape {
             DecalShape::Disc { radius } => x.hypot(y) - radius,
@@ -231,6 +247,16 @@ impl Decal {
                 let phi = y.atan2(x);
                 let w = 0.6 * (2.0 * phi + phase).sin() + 0.4 * (3.0 * phi + 2.0 * phase).sin();
                 x.hypot(y) - radius * (1.0 + wobble * w)
+            }
+            DecalShape::Star {
+                radius,
+                arms,
+                depth,
+                phase,
+            } => {
+                let phi = y.atan2(x);
+                let waist = 0.5 * (1.0 - (f64::from(arms) * (phi - phase)).cos());
+                x.hypot(y) - radius * (1.0 - depth * waist)
             }
         }
     }

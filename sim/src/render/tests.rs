@@ -550,3 +550,33 @@ fn the_blur_is_bounded() {
     );
     assert_eq!(super::bounded_blur([3.0, -4.0], 640, 480), [3.0, -4.0]);
 }
+
+/// A star's arms reach its radius in the arms' directions and its waists
+/// lie at `1 - depth` of it halfway between; the bounding radius holds it.
+#[test]
+fn star_has_its_arms_and_waists_where_its_parameters_put_them() {
+    let (radius, depth, phase) = (0.5, 0.6, 0.3);
+    let star = Decal {
+        centre: V3::new(0.0, 0.0, 10.0),
+        normal: V3::new(0.0, 0.0, -1.0),
+        e1: V3::x(),
+        e2: V3::y(),
+        shape: DecalShape::Star {
+            radius,
+            arms: 5,
+            depth,
+            phase,
+        },
+        radiance: 0.1,
+    };
+    let at = |phi: f64, rho: f64| star.signed_distance(rho * phi.cos(), rho * phi.sin());
+    let waist = phase + std::f64::consts::PI / 5.0;
+    for arm in 0..5 {
+        let tip = phase + f64::from(arm) * std::f64::consts::TAU / 5.0;
+        assert!(at(tip, 0.99 * radius) < 0.0 && at(tip, 1.01 * radius) > 0.0);
+        let w = waist + f64::from(arm) * std::f64::consts::TAU / 5.0;
+        let waist_rho = radius * (1.0 - depth);
+        assert!(at(w, 0.99 * waist_rho) < 0.0 && at(w, 1.01 * waist_rho) > 0.0);
+    }
+    assert_eq!(star.bounding_radius(), radius);
+}

@@ -1,6 +1,6 @@
 //! Distractors for the drogue-free frames and the distractor levels: dark
-//! blobs and rectangles, crescents, canopy-less discs and rings, placed far
-//! behind the drogue as flat decals.
+//! blobs and rectangles, crescents, canopy-less discs and rings, stars and
+//! flowers, placed far behind the drogue as flat decals.
 
 use super::Factor;
 use super::layout::{random_plane, random_point};
@@ -90,6 +90,14 @@ pub(super) fn look_alikes(factor: Factor, cam: &SimCamera, rng: &mut ChaCha8Rng)
         Factor::DarkRing => vec![shape(DecalShape::Ring {
             inner: radius,
             outer: radius * rng.random_range(1.3..2.2),
+        })],
+        // Arms whose rounded tips are about the disc's size: a star of 3-6
+        // arms, its waists at 15-50 % of its radius.
+        Factor::DarkStars => vec![shape(DecalShape::Star {
+            radius: radius * rng.random_range(1.5..3.0),
+            arms: rng.random_range(3..=6),
+            depth: rng.random_range(0.5..0.85),
+            phase: rng.random_range(0.0..TAU),
         })],
         _ => (0..rng.random_range(2..=4))
             .map(|_| dark_shape(cam, rng, None))
