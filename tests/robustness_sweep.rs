@@ -121,7 +121,7 @@ const LIMITS: &[Limit] = &[
     limit("no drogue: disc without canopy", None, 0, 0, None, None, None),
     limit("no drogue: ring without canopy", None, 0, 0, None, None, None),
     limit("no drogue: dark blobs, rectangles", None, 0, 0, None, None, None),
-    limit("no drogue: stars, flowers", None, 5, 0, None, None, None),
+    limit("no drogue: stars, flowers", None, 0, 0, None, None, None),
 ];
 
 fn check(stats: &LevelStats, limit: &Limit) -> Vec<String> {

@@ -7,10 +7,12 @@
 //! canopy's rim must appear. A true drogue shows an edge there on most of
 //! it: the rim's darker band against the sky, brightening outward, or under
 //! heavy haze (the band lifted above a darker sky) the drogue's outer edge
-//! of either polarity, with its canopy lighter than the disc; an
-//! ellipse inside the disc (shading, the disc's lit half), the canopy's own
-//! rim taken for the disc, a crescent, a ring or a dark cloud predicts a rim
-//! where there is none. Saturated pixels (glare) and points outside the
+//! of either polarity; either counts only with the canopy before it lighter
+//! than the disc. An ellipse inside the disc (shading, the disc's lit half),
+//! the canopy's own rim taken for the disc, a crescent, a ring, a dark
+//! cloud, or one arm of a dark star or flower (whose other arms and body
+//! lie where the canopy should be, and whose edges cross the predicted rim
+//! here and there) predicts a rim where there is none. Saturated pixels (glare) and points outside the
 //! image are not judged, so glare and the frame border do not count against
 //! a candidate.
 //!
@@ -52,6 +54,13 @@ const MIN_JUDGED: usize = 12;
 /// Fewest background samples beyond the predicted rim for the
 /// polarity-free test ([`outer_edge_offset`]).
 const OUTER_MIN_BACKGROUND: usize = 3;
+/// How far below the disc's rim mid level the canopy may be, as a share of
+/// the disc's step: the canopy must be lighter than a quarter of the step
+/// above the disc's dark level. Not the mid level itself: a canopy shaded
+/// darker outward (its lit inner ring makes the disc's step) lies near the
+/// mid level beyond 1.3 disc radii, while a star's other arms and body
+/// are at the disc's own dark level.
+const CANOPY_FLOOR_BELOW_MID: f32 = 0.25;
 /// Points of the canopy sampled by [`canopy_between`], from this share of
 /// the disc's radius (past its blurred rim) to this share of the canopy
 /// rim's (inside its band).
@@ -89,12 +98,16 @@ pub struct RimEdge<'a> {
     /// is smeared out and not judged.
     pub widths: &'a [(f64, f64)],
     /// The disc's rim mid level by direction: (image angle about the
-    /// ellipse's centre, radians; gray level), sorted by angle. The
-    /// polarity-free test (`outer_edge_offset`) counts a ray only where the
-    /// canopy between the disc and the predicted rim is lighter than this:
-    /// a dark shape next to the candidate (a blob's other arm, the probe) is
-    /// not canopy.
+    /// ellipse's centre, radians; gray level), sorted by angle. An edge at
+    /// the predicted rim counts only where the canopy between the disc and
+    /// the rim is lighter than a quarter of the disc's step above its dark
+    /// level (`mid - contrast_gray / 4`, [`canopy_between`]): a dark shape
+    /// next to the candidate (a star's other arm, the probe) is not canopy,
+    /// and its edges are not the canopy's rim. Without a mid level nothing
+    /// counts.
     pub mids: &'a [(f64, f32)],
+    /// The disc's rim step (canopy side less disc side), gray levels.
+    pub contrast_gray: f32,
 }
 
 impl RimEdge<'_> {
@@ -103,9 +116,11 @@ impl RimEdge<'_> {
         nearest(self.widths, angle).map_or(2.0, |w| w.1)
     }
 
-    /// The disc's rim mid level nearest to image angle `angle`.
-    fn mid_at(&self, angle: f64) -> Option<f32> {
-        nearest(self.mids, angle).map(|m| m.1)
+    /// The level the canopy must exceed in direction `angle`: a quarter
+    /// of the disc's step above its dark level, from the nearest rim mid
+    /// level.
+    fn canopy_floor_at(&self, angle: f64) -> Option<f32> {
+        nearest(self.mids, angle).map(|m| m.1 - CANOPY_FLOOR_BELOW_MID * self.contrast_gray)
     }
 }
 
@@ -248,19 +263,22 @@ fn pose_ring(
                 scratch,
             )
             .is_some_and(|o| o.abs() <= tolerance)
-                && edge.mid_at(angle).is_some_and(|mid| {
-                    canopy_between(
-                        image,
-                        camera,
-                        pose,
-                        &radial,
-                        inner_radius_m,
-                        canopy_radius_m,
-                        mid,
-                    )
-                })
         };
-        if brightening || outer_edge() {
+        // Either edge is the canopy's only with the canopy before it.
+        let canopy_lighter = || {
+            edge.canopy_floor_at(angle).is_some_and(|floor| {
+                canopy_between(
+                    image,
+                    camera,
+                    pose,
+                    &radial,
+                    inner_radius_m,
+                    canopy_radius_m,
+                    floor,
+                )
+            })
+        };
+        if (brightening || outer_edge()) && canopy_lighter() {
             seen += 1;
         }
     }
@@ -268,8 +286,8 @@ fn pose_ring(
 }
 
 /// Whether the canopy between the disc and its outer rim, along the 3-D
-/// radial direction `radial` of `pose`'s plane, is lighter than the disc's
-/// rim mid level `mid`: at [`ANNULUS_SAMPLES`] points from
+/// radial direction `radial` of `pose`'s plane, is lighter than `floor`
+/// (gray level; [`RimEdge::canopy_floor_at`]): at [`ANNULUS_SAMPLES`] points from
 /// [`ANNULUS_FROM_INNER`] of the disc's radius to [`ANNULUS_TO_OUTER`] of
 /// the rim's, all but one lighter (one may fall on a strut's shadow or a
 /// cable). Saturated samples count as light.
@@ -280,7 +298,7 @@ fn canopy_between(
     radial: &nalgebra::Vector3<f64>,
     inner_radius_m: f64,
     canopy_radius_m: f64,
-    mid: f32,
+    floor: f32,
 ) -> bool {
     let from = ANNULUS_FROM_INNER * inner_radius_m;
     let to = ANNULUS_TO_OUTER * canopy_radius_m;
@@ -296,7 +314,7 @@ fn canopy_between(
         let Some(value) = rim::sample(image, u, v) else {
             return false;
         };
-        if value < mid {
+        if value < floor {
             dark += 1;
             if dark > 1 {
                 return false;
@@ -437,7 +455,21 @@ mod tests {
         min_step_gray: 20.0,
         widths: &[(0.0, 2.0)],
         mids: &[(0.0, 90.0)],
+        contrast_gray: 140.0,
     };
+
+    /// The canopy evidence of `ellipse` on `image` through [`camera`].
+    fn support(image: &GrayImage, ellipse: &Ellipse, edge: RimEdge) -> Option<f64> {
+        ring_support(
+            image,
+            &camera(),
+            ellipse,
+            DROGUE,
+            edge,
+            &mut Vec::new(),
+            &mut Vec::new(),
+        )
+    }
 
     fn disc() -> Ellipse {
         Ellipse {
@@ -451,84 +483,39 @@ mod tests {
 
     #[test]
     fn a_drogue_shows_its_canopy_rim() {
-        let mut profile = Vec::new();
-        let s = ring_support(
-            &render(true),
-            &camera(),
-            &disc(),
-            DROGUE,
-            EDGE,
-            &mut profile,
-            &mut Vec::new(),
-        );
+        let s = support(&render(true), &disc(), EDGE);
         assert!(s.is_some_and(|s| s > 0.9), "{s:?}");
     }
 
     #[test]
     fn a_hazy_drogue_whose_band_is_lighter_than_the_sky_shows_its_rim() {
-        let mut profile = Vec::new();
-        let cam = camera();
         // As the detector asks: a tenth of the disc's rim step (55), at
         // least half of `min_contrast_gray` (12).
         let edge = RimEdge {
             min_step_gray: 6.0,
             widths: &[(0.0, 2.0)],
             mids: &[(0.0, 147.0)],
+            contrast_gray: 55.0,
         };
-        let s = ring_support(
-            &render_hazy(),
-            &cam,
-            &disc(),
-            DROGUE,
-            edge,
-            &mut profile,
-            &mut Vec::new(),
-        );
+        let s = support(&render_hazy(), &disc(), edge);
         assert!(s.is_some_and(|s| s > 0.9), "{s:?}");
         // Without the disc's mid level the canopy cannot be told from a
-        // dark shape beside the disc: only the brightening test is left,
-        // and it sees nothing here.
+        // dark shape beside the disc: nothing counts.
         let blind = RimEdge { mids: &[], ..edge };
-        let s = ring_support(
-            &render_hazy(),
-            &cam,
-            &disc(),
-            DROGUE,
-            blind,
-            &mut profile,
-            &mut Vec::new(),
-        );
+        let s = support(&render_hazy(), &disc(), blind);
         assert!(s.is_some_and(|s| s < 0.1), "{s:?}");
         // An ellipse inside the disc predicts a rim inside the canopy:
         // the canopy-to-band edge there is not the drogue's outer edge.
         for a in [35.0, 54.0] {
             let inner = Ellipse { a, b: a, ..disc() };
-            let s = ring_support(
-                &render_hazy(),
-                &cam,
-                &inner,
-                DROGUE,
-                edge,
-                &mut profile,
-                &mut Vec::new(),
-            );
+            let s = support(&render_hazy(), &inner, edge);
             assert!(s.is_some_and(|s| s < 0.1), "{a}: {s:?}");
         }
     }
 
     #[test]
     fn a_disc_without_canopy_and_a_wrong_size_show_none() {
-        let mut profile = Vec::new();
-        let cam = camera();
-        let bare = ring_support(
-            &render(false),
-            &cam,
-            &disc(),
-            DROGUE,
-            EDGE,
-            &mut profile,
-            &mut Vec::new(),
-        );
+        let bare = support(&render(false), &disc(), EDGE);
         assert!(bare.is_some_and(|s| s < 0.1), "{bare:?}");
         // An ellipse inside the disc predicts a rim inside the canopy.
         let inner = Ellipse {
@@ -536,15 +523,25 @@ mod tests {
             b: 35.0,
             ..disc()
         };
-        let s = ring_support(
-            &render(true),
-            &cam,
-            &inner,
-            DROGUE,
-            EDGE,
-            &mut profile,
-            &mut Vec::new(),
-        );
+        let s = support(&render(true), &inner, EDGE);
+        assert!(s.is_some_and(|s| s < 0.1), "{s:?}");
+    }
+
+    /// A dark flower whose round centre is the candidate: four arms, each
+    /// 50 degrees wide, as dark as the disc, reach exactly to the predicted
+    /// rim and end against the sky there; between them is sky. Along 56 %
+    /// of the rim the arms' ends brighten outward where the canopy's rim
+    /// should, but nothing lighter than the disc lies before them.
+    #[test]
+    fn edges_beyond_dark_arms_are_not_the_canopy_rim() {
+        let image = GrayImage::from_fn(640, 480, |x, y| {
+            let (dx, dy) = (f64::from(x) - 320.0, f64::from(y) - 240.0);
+            let r = dx.hypot(dy) * 2.0 / 800.0;
+            let angle = dy.atan2(dx).to_degrees().rem_euclid(90.0);
+            let in_arm = r < 0.33 && angle < 50.0;
+            Luma([if r < 0.15 || in_arm { 30 } else { 170 }])
+        });
+        let s = support(&image, &disc(), EDGE);
         assert!(s.is_some_and(|s| s < 0.1), "{s:?}");
     }
 }
