@@ -12,9 +12,9 @@
 //! the canopy's own rim taken for the disc, a crescent, a ring, a dark
 //! cloud, or one arm of a dark star or flower (whose other arms and body
 //! lie where the canopy should be, and whose edges cross the predicted rim
-//! here and there) predicts a rim where there is none. Saturated pixels (glare) and points outside the
-//! image are not judged, so glare and the frame border do not count against
-//! a candidate.
+//! here and there) predicts a rim where there is none. Saturated pixels
+//! (glare) and points outside the image are not judged, so glare and the
+//! frame border do not count against a candidate.
 //!
 //! This is looser than the ambiguity module's test (which tells the two
 //! poses apart to a fraction of a pixel): it asks only whether the canopy is
@@ -287,10 +287,10 @@ fn pose_ring(
 
 /// Whether the canopy between the disc and its outer rim, along the 3-D
 /// radial direction `radial` of `pose`'s plane, is lighter than `floor`
-/// (gray level; [`RimEdge::canopy_floor_at`]): at [`ANNULUS_SAMPLES`] points from
-/// [`ANNULUS_FROM_INNER`] of the disc's radius to [`ANNULUS_TO_OUTER`] of
-/// the rim's, all but one lighter (one may fall on a strut's shadow or a
-/// cable). Saturated samples count as light.
+/// (gray level; [`RimEdge::canopy_floor_at`]): at [`ANNULUS_SAMPLES`]
+/// points from [`ANNULUS_FROM_INNER`] of the disc's radius to
+/// [`ANNULUS_TO_OUTER`] of the rim's, all but one lighter (one may fall on
+/// a strut's shadow or a cable). Saturated samples count as light.
 fn canopy_between(
     image: &GrayImage,
     camera: &CameraModel,
