@@ -116,6 +116,7 @@ const LIMITS: &[Limit] = &[
     limit("probe occlusion 30-40 %", Some(100), 0, 0, Some(0.04), Some(0.026), Some(0.32)),
     limit("distractors 1", Some(100), 0, 0, Some(0.013), Some(0.029), Some(0.17)),
     limit("distractors 3", Some(100), 0, 0, Some(0.017), Some(0.024), Some(0.17)),
+    limit("star distractors 2", Some(100), 0, 0, Some(0.023), Some(0.022), Some(0.22)),
     limit("everything", Some(100), 2, 0, Some(0.061), Some(0.14), Some(0.56)),
     limit("no drogue: crescent", None, 0, 0, None, None, None),
     limit("no drogue: disc without canopy", None, 0, 0, None, None, None),

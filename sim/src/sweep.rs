@@ -1,6 +1,7 @@
 //! Randomised single frames for a robustness sweep: one factor at a time
 //! (haze, glare streak over the disc, motion blur, noise, exposure,
-//! vignetting, lens distortion, range, tilt, probe occlusion, distractors)
+//! vignetting, lens distortion, range, tilt, probe occlusion, distractors,
+//! star distractors)
 //! and everything at once, plus drogue-free frames with look-alikes
 //! (crescents, canopy-less discs and rings, dark blobs and rectangles,
 //! stars and flowers).
@@ -76,6 +77,9 @@ pub enum Factor {
     DarkShapes,
     /// Drogue-free: dark stars and flowers (rounded arms joined at a body).
     DarkStars,
+    /// Dark stars and flowers around the drogue (value: how many). Last:
+    /// a level's frames are seeded from its factor's place in this list.
+    StarDistractors,
 }
 
 impl Factor {
@@ -94,6 +98,7 @@ impl Factor {
             Factor::Tilt => "tilt",
             Factor::Occlusion => "probe occlusion",
             Factor::Distractors => "distractors",
+            Factor::StarDistractors => "star distractors",
             Factor::Everything => "everything",
             Factor::Crescent => "no drogue: crescent",
             Factor::CanopylessDisc => "no drogue: disc without canopy",
@@ -145,7 +150,7 @@ impl Level {
             Factor::Range => format!("{v:.0} m"),
             Factor::Tilt => format!("{v:.0} deg"),
             Factor::Occlusion => format!("{:.0}-{:.0} %", v * 100.0, v * 100.0 + 10.0),
-            Factor::Distractors => format!("{v:.0}"),
+            Factor::Distractors | Factor::StarDistractors => format!("{v:.0}"),
             _ => "-".into(),
         }
     }
@@ -164,7 +169,8 @@ impl Level {
 pub fn standard_levels() -> Vec<Level> {
     use Factor::{
         Baseline, Blur, CanopylessDisc, Crescent, DarkRing, DarkShapes, DarkStars, Distortion,
-        Distractors, Everything, Exposure, Glare, Haze, Noise, Occlusion, Range, Tilt, Vignetting,
+        Distractors, Everything, Exposure, Glare, Haze, Noise, Occlusion, Range, StarDistractors,
+        Tilt, Vignetting,
     };
     let mut levels = vec![Level::new(Baseline, 0.0)];
     let mut add = |f: Factor, values: &[f64]| {
@@ -181,6 +187,7 @@ pub fn standard_levels() -> Vec<Level> {
     add(Tilt, &[0.0, 15.0, 30.0, 45.0, 60.0, 75.0]);
     add(Occlusion, &[0.0, 0.1, 0.2, 0.3]);
     add(Distractors, &[1.0, 3.0]);
+    add(StarDistractors, &[2.0]);
     add(Everything, &[0.0]);
     add(Crescent, &[0.0]);
     add(CanopylessDisc, &[0.0]);
@@ -286,6 +293,8 @@ pub struct Settings {
     pub probe_bin: Option<(f64, f64)>,
     /// Dark distractor shapes.
     pub distractors: usize,
+    /// The distractors are stars and flowers (else blobs and rectangles).
+    pub star_distractors: bool,
     /// Plumb-bob distortion (k1, k2, p1, p2, k3).
     pub distortion: [f64; 5],
 }
@@ -391,9 +400,12 @@ impl Sweep {
             scene.probe = probe;
             scene.without_drogue = false;
             for _ in 0..s.distractors {
-                scene
-                    .decals
-                    .push(dark_shape(&cam, &mut rng, Some(centre_px)));
+                scene.decals.push(dark_shape(
+                    &cam,
+                    &mut rng,
+                    Some(centre_px),
+                    s.star_distractors,
+                ));
             }
             truth = Some(t);
         } else {
@@ -425,6 +437,7 @@ fn settings(level: &Level, rng: &mut ChaCha8Rng) -> Settings {
         glare_width_px: None,
         probe_bin: None,
         distractors: 0,
+        star_distractors: false,
         distortion: [0.0; 5],
     };
     let v = level.value;
@@ -449,6 +462,10 @@ fn settings(level: &Level, rng: &mut ChaCha8Rng) -> Settings {
             s.probe_bin = Some((v, v + 0.1));
         }
         Factor::Distractors => s.distractors = v as usize,
+        Factor::StarDistractors => {
+            s.distractors = v as usize;
+            s.star_distractors = true;
+        }
         Factor::Everything => {
             s.distortion = [-0.25, 0.08, 0.0, 0.0, 0.0];
             s.range_m = rng.random_range(2.0..10.0);

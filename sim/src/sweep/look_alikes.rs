@@ -11,12 +11,14 @@ use rand::Rng;
 use rand_chacha::ChaCha8Rng;
 use std::f64::consts::TAU;
 
-/// A dark blob or rectangle far behind the drogue, 15-120 px across, near
-/// `near_px` (within 350 px) half the time when given, else anywhere.
+/// A dark blob or rectangle (or, with `star`, a star or flower) far behind
+/// the drogue, 15-120 px across (a star's arms reach 1.5 times as far),
+/// near `near_px` (within 350 px) half the time when given, else anywhere.
 pub(super) fn dark_shape(
     cam: &SimCamera,
     rng: &mut ChaCha8Rng,
     near_px: Option<[f64; 2]>,
+    star: bool,
 ) -> Decal {
     let depth = rng.random_range(15.0..80.0);
     let size_px = rng.random_range(15.0..120.0);
@@ -33,7 +35,9 @@ pub(super) fn dark_shape(
         _ => random_point(cam, depth, 0.0, rng),
     };
     let (normal, e1, e2) = random_plane(&centre, rng.random_range(0.0..0.7), rng);
-    let shape = if rng.random_bool(0.5) {
+    let shape = if star {
+        star_shape(1.5 * size_m, rng)
+    } else if rng.random_bool(0.5) {
         DecalShape::Blob {
             radius: size_m,
             wobble: rng.random_range(0.1..0.35),
@@ -91,16 +95,24 @@ pub(super) fn look_alikes(factor: Factor, cam: &SimCamera, rng: &mut ChaCha8Rng)
             inner: radius,
             outer: radius * rng.random_range(1.3..2.2),
         })],
-        // Arms whose rounded tips are about the disc's size: a star of 3-6
-        // arms, its waists at 15-50 % of its radius.
-        Factor::DarkStars => vec![shape(DecalShape::Star {
-            radius: radius * rng.random_range(1.5..3.0),
-            arms: rng.random_range(3..=6),
-            depth: rng.random_range(0.5..0.85),
-            phase: rng.random_range(0.0..TAU),
-        })],
+        // Arms whose rounded tips are about the disc's size.
+        Factor::DarkStars => {
+            let radius = radius * rng.random_range(1.5..3.0);
+            vec![shape(star_shape(radius, rng))]
+        }
         _ => (0..rng.random_range(2..=4))
-            .map(|_| dark_shape(cam, rng, None))
+            .map(|_| dark_shape(cam, rng, None, false))
             .collect(),
+    }
+}
+
+/// A star or flower of `radius` (metres): 3-6 arms, its waists at 15-50 %
+/// of its radius, turned at random.
+fn star_shape(radius: f64, rng: &mut ChaCha8Rng) -> DecalShape {
+    DecalShape::Star {
+        radius,
+        arms: rng.random_range(3..=6),
+        depth: rng.random_range(0.5..0.85),
+        phase: rng.random_range(0.0..TAU),
     }
 }
