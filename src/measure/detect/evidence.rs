@@ -46,6 +46,21 @@ const BEYOND_NEAR_RADII: f64 = 0.25;
 const BEYOND_FAR_FROM: f64 = 1.5;
 const BEYOND_FAR_TO_OUTER: f64 = 0.85;
 
+/// Levels of a rim step that the fill test compares the inside with.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct FillLevels {
+    /// The middle of the step (gray): darker inside is the disc's.
+    pub mid: f32,
+    /// Its light side's level (gray): the canopy or sky beyond the rim.
+    pub light: f32,
+}
+
+/// Noise sigmas above a rim step's light side at which a sample inside the
+/// ellipse is a glare's veil, not the background seen through a hole.
+const VEIL_SIGMAS: f32 = 3.0;
+/// Gray levels added to that margin (quantisation, a sharp frame's noise).
+const VEIL_MIN_GRAY: f32 = 2.0;
+
 /// Rays and radius fractions of the fill test (inside the ellipse).
 const FILL_DIRECTIONS: usize = 24;
 const FILL_FRACTIONS: [f64; 5] = [0.1, 0.3, 0.5, 0.7, 0.85];
@@ -54,25 +69,31 @@ impl Detector {
     /// Share of samples inside `ellipse` (undistorted pixels) darker than
     /// the middle of the rim's step. Samples lie on [`FILL_DIRECTIONS`] rays
     /// at [`FILL_FRACTIONS`] of the ellipse's radius; each is compared with
-    /// the mid level of the rim edge nearest in angle (`mids`: angle about
-    /// the ellipse's centre, mid level), so that a glare veil or vignetting
-    /// across the disc does not count as light. A direction with a saturated
-    /// sample (glare) counts neither way. 1 when nothing could be sampled.
+    /// the mid level of the rim edge nearest in angle (`levels`: angle about
+    /// the ellipse's centre, the step's levels), so that a glare veil or
+    /// vignetting across the disc does not count as light. A direction with
+    /// a saturated sample (a glare) counts neither way, nor does a sample
+    /// lighter than that edge's light side by more than the noise (a
+    /// glare's veil below saturation): what a hole in a dark shape shows is
+    /// the background, no lighter than the light side of the shape's own
+    /// rim. 1 when nothing could be sampled.
     pub(super) fn fill_share(
         &self,
         image: &GrayImage,
         ellipse: &Ellipse,
-        mids: &[(f64, f32)],
+        levels: &[(f64, FillLevels)],
     ) -> f64 {
-        if mids.is_empty() {
+        if levels.is_empty() {
             return 1.0;
         }
+        let margin = VEIL_SIGMAS * self.noise_gray as f32 + VEIL_MIN_GRAY;
         let (mut dark, mut counted) = (0usize, 0usize);
         for k in 0..FILL_DIRECTIONS {
             let phi = TAU * (k as f64 + 0.5) / FILL_DIRECTIONS as f64;
             let r = polar_radius(ellipse.a, ellipse.b, ellipse.theta, phi);
             let gap = |a: f64| angle_gap(a, phi);
-            let Some(&(_, mid)) = mids.iter().min_by(|x, y| gap(x.0).total_cmp(&gap(y.0))) else {
+            let Some(&(_, step)) = levels.iter().min_by(|x, y| gap(x.0).total_cmp(&gap(y.0)))
+            else {
                 continue;
             };
             let (sin, cos) = phi.sin_cos();
@@ -87,9 +108,15 @@ impl Detector {
             if samples.iter().flatten().any(|&v| v >= SATURATED_GRAY) {
                 continue;
             }
+            // A sample lighter than the rim's light side is veiled: what a
+            // hole in a dark shape shows is the background beyond it, no
+            // lighter than that.
             for value in samples.into_iter().flatten() {
+                if value > step.light + margin {
+                    continue;
+                }
                 counted += 1;
-                if value < mid {
+                if value < step.mid {
                     dark += 1;
                 }
             }

@@ -988,3 +988,26 @@ fn an_overexposed_canopy_is_not_taken_for_the_disc() {
         "{e:?}"
     );
 }
+
+/// A glare streak whose core over the disc stays just below saturation
+/// (it saturates over the lighter canopy only): the disc's inside under it
+/// is lighter than the canopy beside the rim, which no hole in a dark shape
+/// can show (a hole shows the background, at the rim's light level). Those
+/// samples are a veil and count neither way. Counted as light inside (as
+/// before), they failed the disc on all four of these streaks.
+#[test]
+fn a_veil_lighter_than_the_canopy_does_not_count_as_light_inside() {
+    let (w, h) = (400, 300);
+    let cam = camera(w, h);
+    let truth = Ellipse::new(201.3, 148.7, 31.0, 29.5, 0.2);
+    let sharp = Scene::new(truth).render(w, h, 2.0, 43);
+    for peak in [210.0, 215.0] {
+        for off_px in [0.0, 2.0] {
+            let img = add_glare_streak(&sharp, [truth.cx + off_px, truth.cy], 1.9, 30.0, peak);
+            let cand = detector(&cam)
+                .detect(&img, None)
+                .unwrap_or_else(|| panic!("not detected under a streak of {peak} at {off_px} px"));
+            assert_near(&cand.ellipse_px, &truth, 0.5, 0.5);
+        }
+    }
+}

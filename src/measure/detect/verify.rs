@@ -2,6 +2,7 @@
 //! fit, and the narrow pass around it (repeated until it settles), with the
 //! checks of the rim itself (size, shape, contrast, one dark inside).
 
+use super::evidence::FillLevels;
 use super::search::Seed;
 use super::{
     Detector, Reject, SATURATED_GRAY, Verified, conic_fit, median, polar_radius,
@@ -171,6 +172,15 @@ pub(super) fn glare_on_light_side(p: &[f32], s_min: f64, step: f64, e: &rim::Ray
     let index = |s: f64| (((s - s_min) / step).max(0.0) as usize).min(last);
     let (from, to) = (index(e.s), (index(e.light_s) + 2).min(last));
     p[from..=to].iter().any(|&v| v >= SATURATED_GRAY)
+}
+
+/// A rim step's levels for the fill test: its mid level and its light
+/// side's (`contrast` the step's light minus dark).
+fn fill_levels(mid: f32, contrast: f64) -> FillLevels {
+    FillLevels {
+        mid,
+        light: mid + 0.5 * contrast as f32,
+    }
 }
 
 /// Removes the items of `v` whose flag in `marked` (aligned with it) is set.
@@ -526,11 +536,11 @@ impl Detector {
         // glare's skirt lifts the disc's levels beside the streak. Each is
         // kept with its point (undistorted pixels) and turned into an angle
         // about the fitted ellipse for the fill test.
-        let mut glare_mids: Vec<([f64; 2], f32)> = Vec::new();
+        let mut glare_mids: Vec<([f64; 2], FillLevels)> = Vec::new();
         if glared > 0 && 2 * glared < glares.len() {
             glare_mids = (0..glares.len())
                 .filter(|&i| glares[i])
-                .map(|i| (undistorted[i], mid_levels[i]))
+                .map(|i| (undistorted[i], fill_levels(mid_levels[i], contrasts[i])))
                 .collect();
             drop_marked(&mut points_px, &glares);
             drop_marked(&mut undistorted, &glares);
@@ -592,11 +602,15 @@ impl Detector {
                 (angle, mid_levels[i])
             })
             .collect();
-        let mut fill_mids = mids.clone();
+        let mut fill_mids: Vec<(f64, FillLevels)> = inliers
+            .iter()
+            .zip(&mids)
+            .map(|(&i, &(angle, mid))| (angle, fill_levels(mid, contrasts[i])))
+            .collect();
         fill_mids.extend(
             glare_mids
                 .iter()
-                .map(|&(p, mid)| ((p[1] - ellipse.cy).atan2(p[0] - ellipse.cx), mid)),
+                .map(|&(p, levels)| ((p[1] - ellipse.cy).atan2(p[0] - ellipse.cx), levels)),
         );
         let fill = self.fill_share(image, &ellipse, &fill_mids);
         if fill < self.cfg.min_fill {
