@@ -1011,3 +1011,27 @@ fn a_veil_lighter_than_the_canopy_does_not_count_as_light_inside() {
         }
     }
 }
+
+/// A disc tilted 75 degrees (the largest tilt `min_axis_ratio` accepts)
+/// 22 degrees off the optical axis, its long axis radial, images at an axis
+/// ratio of 0.249 (the simulator's frame: 70.0 x 17.4 px at (150, 237)),
+/// below cos 75 = 0.259: the oblique image plane stretches it radially by
+/// 1 / cos 22. Taken out, it is plausible. The same shape with its long axis
+/// across the radial direction, or at the image centre, is flatter than any
+/// disc within 75 degrees and is not.
+#[test]
+fn the_axis_ratio_is_judged_along_the_line_of_sight() {
+    let cam = camera(1280, 960);
+    let detector = detector(&cam);
+    let (cx, cy) = (150.1, 237.4);
+    let radial = (cy - 480.0f64).atan2(cx - 640.0);
+    let along = Ellipse::new(cx, cy, 70.0, 17.4, radial);
+    assert!(detector.plausible(&along, 1.0));
+    let across = Ellipse::new(cx, cy, 70.0, 17.4, radial + std::f64::consts::FRAC_PI_2);
+    assert!(!detector.plausible(&across, 1.0));
+    let centred = Ellipse::new(640.0, 480.0, 70.0, 17.4, radial);
+    assert!(!detector.plausible(&centred, 1.0));
+    // Within 75 degrees at the centre: plausible as before.
+    let round_enough = Ellipse::new(640.0, 480.0, 70.0, 18.2, radial);
+    assert!(detector.plausible(&round_enough, 1.0));
+}

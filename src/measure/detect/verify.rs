@@ -278,12 +278,45 @@ impl Detector {
     }
 
     /// Size and shape plausible for the disc (`slack` widens the limits).
+    /// The shape is judged as seen along the line of sight: off the optical
+    /// axis the image plane is oblique to it and stretches a small shape
+    /// along the radial direction by the inverse cosine of the angle off
+    /// the axis (a disc tilted 75 degrees, 22 degrees off the axis with its
+    /// long axis radial, images at an axis ratio of 0.243, below cos 75 =
+    /// 0.259), so that stretch is taken out before the axis ratio is held
+    /// to `min_axis_ratio`.
     pub(super) fn plausible(&self, e: &Ellipse, slack: f64) -> bool {
         e.a.is_finite()
             && e.b > 0.0
             && e.a <= 2.0 * self.max_radius_px / slack
             && e.a >= slack * 0.8 * self.min_radius_px
-            && e.b / e.a >= self.cfg.min_axis_ratio * slack
+            && self.axis_ratio_along_sight(e) >= self.cfg.min_axis_ratio * slack
+    }
+
+    /// The axis ratio of `e` (undistorted pixels) with the oblique image
+    /// plane's radial stretch at its centre taken out: its second moments
+    /// compressed along the radial direction by the cosine of the angle off
+    /// the optical axis.
+    fn axis_ratio_along_sight(&self, e: &Ellipse) -> f64 {
+        let ray = self.camera.ray_camera([e.cx, e.cy]);
+        let cos = 1.0 / ray.norm();
+        let radial = nalgebra::Vector2::new(ray.x, ray.y);
+        let Some(radial) = radial.try_normalize(1e-12).filter(|_| cos.is_finite()) else {
+            return e.b / e.a;
+        };
+        let (s, c) = e.theta.sin_cos();
+        let axes = nalgebra::Matrix2::new(c, -s, s, c);
+        let moments =
+            axes * nalgebra::Matrix2::new(e.a * e.a, 0.0, 0.0, e.b * e.b) * axes.transpose();
+        let compress = nalgebra::Matrix2::identity() - (1.0 - cos) * radial * radial.transpose();
+        let seen = compress * moments * compress.transpose();
+        let eig = seen.symmetric_eigenvalues();
+        let (small, large) = (eig.min(), eig.max());
+        if small > 0.0 && large > 0.0 {
+            (small / large).sqrt()
+        } else {
+            e.b / e.a
+        }
     }
 
     /// Narrow ray pass around an ellipse (undistorted pixels), robust refit,
