@@ -9,7 +9,7 @@
 use drogue_sim::sweep::{Sweep, standard_levels};
 use drogue_vision::camera::CameraModel;
 use drogue_vision::config::Config;
-use drogue_vision::measure::detect::{Detector, canopy::DrogueCircles};
+use drogue_vision::measure::detect::Detector;
 use drogue_vision::measure::ellipse::Ellipse;
 use drogue_vision::measure::fit::Fitter;
 use nalgebra::{Matrix2, Matrix3, Vector2};
@@ -41,10 +41,7 @@ fn frame_bias(
     let mut det = Detector::new(
         &config.detect,
         camera,
-        DrogueCircles {
-            inner_radius_m: 0.15,
-            canopy_radius_m: 0.33,
-        },
+        drogue_vision::testing::drogue_circles(config),
     );
     let c = det.detect(image, None)?;
     let fit = Fitter::new(&config.fit)

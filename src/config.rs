@@ -27,6 +27,7 @@ const ANY_U64: f64 = i64::MAX as f64;
 pub const RANGES: &[(&str, Range)] = &[
     ("drogue.inner_radius_m", Range::above(0.0, 10.0)),
     ("drogue.canopy_radius_m", Range::above(0.0, 20.0)),
+    ("drogue.canopy_band_m", Range::closed(0.0, 20.0)),
     ("mount.camera_position_body_m", Range::closed(-100.0, 100.0)),
     ("mount.camera_roll_deg", Range::closed(-360.0, 360.0)),
     ("mount.camera_pitch_deg", Range::closed(-360.0, 360.0)),
@@ -329,6 +330,11 @@ impl Config {
             (
                 self.drogue.canopy_radius_m > self.drogue.inner_radius_m,
                 "[drogue] canopy_radius_m must exceed inner_radius_m",
+            ),
+            (
+                self.drogue.canopy_band_m
+                    < self.drogue.canopy_radius_m - self.drogue.inner_radius_m,
+                "[drogue] canopy_band_m must be narrower than the canopy (canopy_radius_m - inner_radius_m)",
             ),
             (
                 d.min_range_m < d.max_range_m,

@@ -184,6 +184,7 @@ pub fn drogue_circles(config: &Config) -> DrogueCircles {
     DrogueCircles {
         inner_radius_m: config.drogue.inner_radius_m,
         canopy_radius_m: config.drogue.canopy_radius_m,
+        canopy_band_m: config.drogue.canopy_band_m,
     }
 }
 

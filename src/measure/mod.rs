@@ -30,6 +30,8 @@ pub struct DrogueConfig {
     pub inner_radius_m: f64,
     /// Radius of the canopy's outer rim, metres (resolves the ambiguity).
     pub canopy_radius_m: f64,
+    /// Width of the darker band at the canopy's outer edge, metres.
+    pub canopy_band_m: f64,
 }
 
 /// What the measurement needs from the configuration, and nothing more: the
@@ -185,6 +187,7 @@ impl Measurer {
                 detect::canopy::DrogueCircles {
                     inner_radius_m: d.inner_radius_m,
                     canopy_radius_m: d.canopy_radius_m,
+                    canopy_band_m: d.canopy_band_m,
                 },
             ),
             fitter: fit::Fitter::new(&config.fit),

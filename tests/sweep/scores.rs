@@ -38,6 +38,7 @@ pub fn scored_frames(seed: u64, frames: u64) -> Vec<ScoredFrame> {
     let circles = DrogueCircles {
         inner_radius_m: config.drogue.inner_radius_m,
         canopy_radius_m: config.drogue.canopy_radius_m,
+        canopy_band_m: config.drogue.canopy_band_m,
     };
     let mut detectors: Vec<([f64; 5], Detector)> = Vec::new();
     let mut sim = Sweep::new(seed);

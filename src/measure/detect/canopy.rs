@@ -82,6 +82,10 @@ pub struct DrogueCircles {
     pub inner_radius_m: f64,
     /// The canopy's outer rim's radius.
     pub canopy_radius_m: f64,
+    /// Width of the darker band at the canopy's outer edge: where haze
+    /// lifts it to the sky's level, the light fabric ends this much inside
+    /// the rim.
+    pub canopy_band_m: f64,
 }
 
 /// What counts as the canopy's rim edge.
@@ -240,6 +244,7 @@ fn pose_ring(
             .max(MIN_TOLERANCE_PX)
             .max(0.25 * width);
         let brightening = strongest >= edge.min_step_gray && offset.abs() <= tolerance;
+        let band_px = (drogue.canopy_band_m / canopy_radius_m) * radius_px;
         let mut outer_edge = || {
             // The background is read well beyond the rim's band: a band
             // read as background would make the canopy's edge against it
@@ -262,7 +267,6 @@ fn pose_ring(
                 edge.min_step_gray,
                 scratch,
             )
-            .is_some_and(|o| o.abs() <= tolerance)
         };
         // Either edge is the canopy's only with the canopy before it.
         let canopy_lighter = || {
@@ -278,7 +282,15 @@ fn pose_ring(
                 )
             })
         };
-        if (brightening || outer_edge()) && canopy_lighter() {
+        // The rim's own edge, or (where haze has lifted the band to the
+        // sky's level) the light canopy's end, darkening outward a band's
+        // width inside the rim; counted apart, the better of the two kept.
+        let edge_seen = brightening
+            || outer_edge().is_some_and(|o| {
+                let inward = if o.lighter_inside { band_px } else { 0.0 };
+                o.offset_px <= tolerance && o.offset_px >= -tolerance - inward
+            });
+        if edge_seen && canopy_lighter() {
             seen += 1;
         }
     }
@@ -324,6 +336,16 @@ fn canopy_between(
     true
 }
 
+/// The drogue's outer edge on a profile across the predicted rim.
+#[derive(Clone, Copy, Debug)]
+struct OuterEdge {
+    /// Offset from the predicted rim, pixels (outward +).
+    offset_px: f64,
+    /// Whether the profile inside the edge is lighter than the background
+    /// beyond it (the edge darkens outward).
+    lighter_inside: bool,
+}
+
 /// Where the drogue ends along a profile across the predicted rim (samples
 /// [`STEP_PX`] apart from offset `start`, pixels): the outermost place where
 /// the profile leaves the background's level by at least `min_step`, with
@@ -343,7 +365,7 @@ fn outer_edge_offset(
     outside_from: f64,
     min_step: f32,
     scratch: &mut Vec<f32>,
-) -> Option<f64> {
+) -> Option<OuterEdge> {
     let first_outside = ((outside_from - start) / STEP_PX).ceil().max(0.0) as usize;
     scratch.clear();
     scratch.extend_from_slice(profile.get(first_outside..)?);
@@ -376,7 +398,10 @@ fn outer_edge_offset(
         .rev()
         .find(|&i| (means[i] - background).abs() >= (half_way - background).abs())
         .unwrap_or(edge);
-    Some(start + (crossing as f64 + 0.5 * lag as f64) * STEP_PX)
+    Some(OuterEdge {
+        offset_px: start + (crossing as f64 + 0.5 * lag as f64) * STEP_PX,
+        lighter_inside: level > background,
+    })
 }
 
 #[cfg(test)]
@@ -449,6 +474,7 @@ mod tests {
     const DROGUE: DrogueCircles = DrogueCircles {
         inner_radius_m: 0.15,
         canopy_radius_m: 0.33,
+        canopy_band_m: 0.018,
     };
 
     const EDGE: RimEdge = RimEdge {
@@ -511,6 +537,44 @@ mod tests {
             let s = support(&render_hazy(), &inner, edge);
             assert!(s.is_some_and(|s| s < 0.1), "{a}: {s:?}");
         }
+    }
+
+    /// Heavier haze: the band takes the sky's level, and the light canopy
+    /// ends a band's width (0.018 m, `DROGUE`'s) inside the rim, darkening
+    /// outward straight to the sky. That end is the drogue's outer edge
+    /// there; taken for nothing (as before), the evidence was 0.
+    #[test]
+    fn a_hazy_drogue_whose_band_has_the_sky_level_shows_its_canopy_end() {
+        let rim_m = DROGUE.canopy_radius_m;
+        let end_m = rim_m - DROGUE.canopy_band_m;
+        let image = GrayImage::from_fn(640, 480, |x, y| {
+            let r = (f64::from(x) - 320.0).hypot(f64::from(y) - 240.0) * 2.0 / 800.0;
+            Luma([if r < 0.15 {
+                120
+            } else if r < end_m {
+                175
+            } else {
+                135
+            }])
+        });
+        let edge = RimEdge {
+            min_step_gray: 6.0,
+            widths: &[(0.0, 2.0)],
+            mids: &[(0.0, 147.0)],
+            contrast_gray: 55.0,
+        };
+        let s = support(&image, &disc(), edge);
+        assert!(s.is_some_and(|s| s > 0.9), "{s:?}");
+        // A disc whose pose puts the rim a band's width further in (an
+        // ellipse 5.5 % smaller) does not take the canopy's end for its
+        // rim's: the end would lie outside its rim.
+        let smaller = Ellipse {
+            a: 60.0 * end_m / rim_m * 0.9,
+            b: 60.0 * end_m / rim_m * 0.9,
+            ..disc()
+        };
+        let s = support(&image, &smaller, edge);
+        assert!(s.is_some_and(|s| s < 0.1), "{s:?}");
     }
 
     #[test]
