@@ -282,9 +282,9 @@ fn pose_ring(
                 )
             })
         };
-        // The rim's own edge, or (where haze has lifted the band to the
-        // sky's level) the light canopy's end, darkening outward a band's
-        // width inside the rim; counted apart, the better of the two kept.
+        // The rim's own edge or, for an edge that darkens outward, up to a
+        // band's width further in: where haze has given the band the sky's
+        // level, the light canopy ends there.
         let edge_seen = brightening
             || outer_edge().is_some_and(|o| {
                 let inward = if o.lighter_inside { band_px } else { 0.0 };
@@ -565,9 +565,9 @@ mod tests {
         };
         let s = support(&image, &disc(), edge);
         assert!(s.is_some_and(|s| s > 0.9), "{s:?}");
-        // A disc whose pose puts the rim a band's width further in (an
-        // ellipse 5.5 % smaller) does not take the canopy's end for its
-        // rim's: the end would lie outside its rim.
+        // An ellipse 15 % smaller predicts its rim inside the canopy: the
+        // canopy's end lies outside that rim, where no band's allowance
+        // reaches, and does not count.
         let smaller = Ellipse {
             a: 60.0 * end_m / rim_m * 0.9,
             b: 60.0 * end_m / rim_m * 0.9,

@@ -298,9 +298,9 @@ impl Detector {
     /// compressed along the radial direction by the cosine of the angle off
     /// the optical axis.
     fn axis_ratio_along_sight(&self, e: &Ellipse) -> f64 {
-        let ray = self.camera.ray_camera([e.cx, e.cy]);
-        let cos = 1.0 / ray.norm();
-        let radial = nalgebra::Vector2::new(ray.x, ray.y);
+        let cos = 1.0 / self.camera.ray_camera([e.cx, e.cy]).norm();
+        // The radial direction in pixels, where the ellipse is.
+        let radial = nalgebra::Vector2::new(e.cx - self.camera.cx(), e.cy - self.camera.cy());
         let Some(radial) = radial.try_normalize(1e-12).filter(|_| cos.is_finite()) else {
             return e.b / e.a;
         };
