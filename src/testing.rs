@@ -179,7 +179,7 @@ pub fn camera_from_sim(cam: &SimCamera, name: &str) -> CameraModel {
         .expect("the simulator's camera is valid")
 }
 
-/// The drogue's two circles as `config` gives them.
+/// The drogue's two circles and its canopy's band as `config` gives them.
 pub fn drogue_circles(config: &Config) -> DrogueCircles {
     DrogueCircles {
         inner_radius_m: config.drogue.inner_radius_m,

@@ -2,7 +2,7 @@
 //! sharpness of its steps, the canopy's rim where its pose puts it, and the
 //! score that ranks the candidates.
 
-use super::verify::{CLIPPED_SHARE, RimPass};
+use super::verify::{CLIPPED_SHARE, FillLevels, RimPass};
 use super::{Detector, Reject, SATURATED_GRAY, Verified, angle_gap, canopy, polar_radius, rim};
 use crate::measure::ellipse::Ellipse;
 use image::GrayImage;
@@ -45,15 +45,6 @@ const BEYOND_FAR_SAMPLES: usize = 8;
 const BEYOND_NEAR_RADII: f64 = 0.25;
 const BEYOND_FAR_FROM: f64 = 1.5;
 const BEYOND_FAR_TO_OUTER: f64 = 0.85;
-
-/// Levels of a rim step that the fill test compares the inside with.
-#[derive(Clone, Copy, Debug)]
-pub(super) struct FillLevels {
-    /// The middle of the step (gray): darker inside is the disc's.
-    pub mid: f32,
-    /// Its light side's level (gray): the canopy or sky beyond the rim.
-    pub light: f32,
-}
 
 /// Noise sigmas above a rim step's light side at which a sample inside the
 /// ellipse is a glare's veil, not the background seen through a hole.

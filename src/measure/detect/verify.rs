@@ -2,7 +2,6 @@
 //! fit, and the narrow pass around it (repeated until it settles), with the
 //! checks of the rim itself (size, shape, contrast, one dark inside).
 
-use super::evidence::FillLevels;
 use super::search::Seed;
 use super::{
     Detector, Reject, SATURATED_GRAY, Verified, conic_fit, median, polar_radius,
@@ -174,12 +173,23 @@ pub(super) fn glare_on_light_side(p: &[f32], s_min: f64, step: f64, e: &rim::Ray
     p[from..=to].iter().any(|&v| v >= SATURATED_GRAY)
 }
 
-/// A rim step's levels for the fill test: its mid level and its light
-/// side's (`contrast` the step's light minus dark).
-fn fill_levels(mid: f32, contrast: f64) -> FillLevels {
-    FillLevels {
-        mid,
-        light: mid + 0.5 * contrast as f32,
+/// Levels of a rim step that the fill test compares the inside with.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct FillLevels {
+    /// The middle of the step (gray): darker inside is the disc's.
+    pub mid: f32,
+    /// Its light side's level (gray): the canopy or sky beyond the rim.
+    pub light: f32,
+}
+
+impl FillLevels {
+    /// The levels of a step with mid level `mid` and `contrast` (its light
+    /// minus its dark level), gray.
+    pub(super) fn of_step(mid: f32, contrast: f64) -> Self {
+        Self {
+            mid,
+            light: mid + 0.5 * contrast as f32,
+        }
     }
 }
 
@@ -569,11 +579,16 @@ impl Detector {
         // glare's skirt lifts the disc's levels beside the streak. Each is
         // kept with its point (undistorted pixels) and turned into an angle
         // about the fitted ellipse for the fill test.
-        let mut glare_mids: Vec<([f64; 2], FillLevels)> = Vec::new();
+        let mut glare_steps: Vec<([f64; 2], FillLevels)> = Vec::new();
         if glared > 0 && 2 * glared < glares.len() {
-            glare_mids = (0..glares.len())
+            glare_steps = (0..glares.len())
                 .filter(|&i| glares[i])
-                .map(|i| (undistorted[i], fill_levels(mid_levels[i], contrasts[i])))
+                .map(|i| {
+                    (
+                        undistorted[i],
+                        FillLevels::of_step(mid_levels[i], contrasts[i]),
+                    )
+                })
                 .collect();
             drop_marked(&mut points_px, &glares);
             drop_marked(&mut undistorted, &glares);
@@ -635,17 +650,17 @@ impl Detector {
                 (angle, mid_levels[i])
             })
             .collect();
-        let mut fill_mids: Vec<(f64, FillLevels)> = inliers
+        let mut fill_steps: Vec<(f64, FillLevels)> = inliers
             .iter()
             .zip(&mids)
-            .map(|(&i, &(angle, mid))| (angle, fill_levels(mid, contrasts[i])))
+            .map(|(&i, &(angle, mid))| (angle, FillLevels::of_step(mid, contrasts[i])))
             .collect();
-        fill_mids.extend(
-            glare_mids
+        fill_steps.extend(
+            glare_steps
                 .iter()
                 .map(|&(p, levels)| ((p[1] - ellipse.cy).atan2(p[0] - ellipse.cx), levels)),
         );
-        let fill = self.fill_share(image, &ellipse, &fill_mids);
+        let fill = self.fill_share(image, &ellipse, &fill_steps);
         if fill < self.cfg.min_fill {
             return Err(Reject::LightInside(fill));
         }
