@@ -71,7 +71,10 @@ const fn limit(
 /// found its last disc (90 -> 100 %) when the edge source's circles were
 /// looked for again past what lies inside them, and lost its wrong one
 /// (the false count 3 -> 2) when steps into glare stopped giving rim
-/// points (fourteenth session).
+/// points (fourteenth session). Its accuracy limits rose with the throat
+/// shadow it draws since the seventeenth session (medians centre 0.048 ->
+/// 0.061 px, position 0.094 -> 0.200 %, normal 0.36 -> 0.71 degrees: the
+/// shadow moves wide steps' mid-level crossings outward).
 #[rustfmt::skip]
 const LIMITS: &[Limit] = &[
     //    level                                  detected %  false  wrong  centre px     position %    normal deg
@@ -117,7 +120,9 @@ const LIMITS: &[Limit] = &[
     limit("distractors 1", Some(100), 0, 0, Some(0.013), Some(0.029), Some(0.17)),
     limit("distractors 3", Some(100), 0, 0, Some(0.017), Some(0.024), Some(0.17)),
     limit("star distractors 2", Some(100), 0, 0, Some(0.023), Some(0.022), Some(0.22)),
-    limit("everything", Some(100), 2, 0, Some(0.061), Some(0.14), Some(0.56)),
+    limit("throat shadow 15 %", Some(100), 0, 0, Some(0.02), Some(0.02), Some(0.13)),
+    limit("throat shadow 30 %", Some(100), 0, 0, Some(0.02), Some(0.053), Some(0.13)),
+    limit("everything", Some(100), 2, 0, Some(0.092), Some(0.30), Some(1.07)),
     limit("no drogue: crescent", None, 0, 0, None, None, None),
     limit("no drogue: disc without canopy", None, 0, 0, None, None, None),
     limit("no drogue: ring without canopy", None, 0, 0, None, None, None),

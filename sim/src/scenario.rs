@@ -172,6 +172,11 @@ pub struct DrogueSpec {
     pub hose_radiance: f64,
     /// Radiance of the probe, 0..1.
     pub probe_radiance: f64,
+    /// Share of the canopy's radiance lost at the disc's edge to the
+    /// throat's shadow, 0..1 (0: none).
+    pub throat_shade: f64,
+    /// E-folding width of the throat's shadow outward from the disc, metres.
+    pub throat_shade_width_m: f64,
 }
 
 /// Turbulence and the sway model (see [`crate::turbulence`]).

@@ -210,6 +210,8 @@ impl Simulator {
             canopy: dr.canopy_radiance,
             rim: dr.rim_radiance,
             strut: dr.strut_radiance,
+            throat_shade: dr.throat_shade,
+            throat_shade_width: dr.throat_shade_width_m,
         };
         let hose_exit = to_cam(&st.hose_exit_ned);
         // The hose leaves the coupling, just ahead of (behind, seen from the

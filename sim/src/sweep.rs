@@ -36,6 +36,18 @@ pub const CANOPY_RADIUS_M: f64 = 0.33;
 /// Rim points for the occlusion shares.
 const RIM_POINTS: usize = 360;
 
+/// Strongest throat shadow the `everything` level draws: up to 30 % of the
+/// canopy's radiance lost at the disc's edge, a canopy in its coupling's
+/// shadow.
+const MAX_THROAT_SHADE: f64 = 0.3;
+
+/// Range of the throat shadow's e-folding width, metres: an eighth to a
+/// third of the inner radius, from a tight shadow line to a soft one.
+const THROAT_SHADE_WIDTH_M: (f64, f64) = (0.02, 0.05);
+
+/// Salt of the throat shadow's random stream.
+const THROAT_STREAM: u64 = 0x7468_726f_6174;
+
 /// What a sweep level varies.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum Factor {
@@ -77,9 +89,12 @@ pub enum Factor {
     DarkShapes,
     /// Drogue-free: dark stars and flowers (rounded arms joined at a body).
     DarkStars,
-    /// Dark stars and flowers around the drogue (value: how many). Last:
-    /// a level's frames are seeded from its factor's place in this list.
+    /// Dark stars and flowers around the drogue (value: how many).
     StarDistractors,
+    /// The canopy darkened toward the disc by the throat's shadow (value:
+    /// the share of its radiance lost at the disc's edge). Last: a level's
+    /// frames are seeded from its factor's place in this list.
+    ThroatShadow,
 }
 
 impl Factor {
@@ -99,6 +114,7 @@ impl Factor {
             Factor::Occlusion => "probe occlusion",
             Factor::Distractors => "distractors",
             Factor::StarDistractors => "star distractors",
+            Factor::ThroatShadow => "throat shadow",
             Factor::Everything => "everything",
             Factor::Crescent => "no drogue: crescent",
             Factor::CanopylessDisc => "no drogue: disc without canopy",
@@ -151,6 +167,7 @@ impl Level {
             Factor::Tilt => format!("{v:.0} deg"),
             Factor::Occlusion => format!("{:.0}-{:.0} %", v * 100.0, v * 100.0 + 10.0),
             Factor::Distractors | Factor::StarDistractors => format!("{v:.0}"),
+            Factor::ThroatShadow => format!("{:.0} %", v * 100.0),
             _ => "-".into(),
         }
     }
@@ -170,7 +187,7 @@ pub fn standard_levels() -> Vec<Level> {
     use Factor::{
         Baseline, Blur, CanopylessDisc, Crescent, DarkRing, DarkShapes, DarkStars, Distortion,
         Distractors, Everything, Exposure, Glare, Haze, Noise, Occlusion, Range, StarDistractors,
-        Tilt, Vignetting,
+        ThroatShadow, Tilt, Vignetting,
     };
     let mut levels = vec![Level::new(Baseline, 0.0)];
     let mut add = |f: Factor, values: &[f64]| {
@@ -188,6 +205,7 @@ pub fn standard_levels() -> Vec<Level> {
     add(Occlusion, &[0.0, 0.1, 0.2, 0.3]);
     add(Distractors, &[1.0, 3.0]);
     add(StarDistractors, &[2.0]);
+    add(ThroatShadow, &[0.15, 0.3]);
     add(Everything, &[0.0]);
     add(Crescent, &[0.0]);
     add(CanopylessDisc, &[0.0]);
@@ -297,6 +315,11 @@ pub struct Settings {
     pub star_distractors: bool,
     /// Plumb-bob distortion (k1, k2, p1, p2, k3).
     pub distortion: [f64; 5],
+    /// Share of the canopy's radiance the throat's shadow takes at the
+    /// disc's edge ([`crate::render::DrogueView::throat_shade`]).
+    pub throat_shade: f64,
+    /// E-folding width of the throat's shadow, metres.
+    pub throat_shade_width_m: f64,
 }
 
 impl Sweep {
@@ -334,7 +357,8 @@ impl Sweep {
             ^ mix(level.value.to_bits()).rotate_left(17)
             ^ mix(index).rotate_left(41));
         let mut rng = ChaCha8Rng::seed_from_u64(key);
-        let s = settings(level, &mut rng);
+        let mut s = settings(level, &mut rng);
+        (s.throat_shade, s.throat_shade_width_m) = throat_shadow(level, key);
         let look = Look {
             sky_zenith: 0.50,
             sky_horizon: 0.68,
@@ -377,7 +401,9 @@ impl Sweep {
         };
         let mut truth = None;
         if level.factor.has_drogue() {
-            let (drogue, hose, probe, t) = lay_out_drogue(&cam, &s, &mut rng);
+            let (mut drogue, hose, probe, t) = lay_out_drogue(&cam, &s, &mut rng);
+            drogue.throat_shade = s.throat_shade;
+            drogue.throat_shade_width = s.throat_shade_width_m;
             let centre_px = cam.project_px(&drogue.centre).unwrap_or([cam.cx, cam.cy]);
             if let Some(width_px) = s.glare_width_px {
                 let a_px = t.ellipse.a;
@@ -439,6 +465,8 @@ fn settings(level: &Level, rng: &mut ChaCha8Rng) -> Settings {
         distractors: 0,
         star_distractors: false,
         distortion: [0.0; 5],
+        throat_shade: 0.0,
+        throat_shade_width_m: THROAT_SHADE_WIDTH_M.0,
     };
     let v = level.value;
     match level.factor {
@@ -492,12 +520,28 @@ fn settings(level: &Level, rng: &mut ChaCha8Rng) -> Settings {
             harsh_imaging(&mut s, rng);
         }
         Factor::Baseline
+        | Factor::ThroatShadow
         | Factor::Crescent
         | Factor::CanopylessDisc
         | Factor::DarkRing
         | Factor::DarkShapes => {}
     }
     s
+}
+
+/// The canopy's throat shadow (strength, e-folding width in metres): the
+/// level's own strength, a random one for `everything`, none otherwise.
+/// Drawn from a stream of its own, so that every other draw of a frame is
+/// what it was before the canopy had a shadow.
+fn throat_shadow(level: &Level, key: u64) -> (f64, f64) {
+    let mut rng = ChaCha8Rng::seed_from_u64(mix(key ^ THROAT_STREAM));
+    let width_m = rng.random_range(THROAT_SHADE_WIDTH_M.0..THROAT_SHADE_WIDTH_M.1);
+    let strength = match level.factor {
+        Factor::ThroatShadow => level.value,
+        Factor::Everything => rng.random_range(0.0..MAX_THROAT_SHADE),
+        _ => 0.0,
+    };
+    (strength, width_m)
 }
 
 /// The `everything` level's imaging: read noise 2-8 DN, gain 0.4-1.3,
@@ -536,6 +580,13 @@ mod tests {
         assert_eq!((noise.read_noise_dn, noise.blur_px), (12.0, 0.0));
         let haze = sweep.frame(&Level::new(Factor::Haze, 0.4), 1).settings;
         assert_eq!(haze.haze, 0.4);
+        assert_eq!(haze.throat_shade, 0.0);
+        let throat = sweep
+            .frame(&Level::new(Factor::ThroatShadow, 0.3), 2)
+            .settings;
+        assert_eq!(throat.throat_shade, 0.3);
+        let (lo, hi) = THROAT_SHADE_WIDTH_M;
+        assert!((lo..hi).contains(&throat.throat_shade_width_m));
     }
 
     #[test]

@@ -101,7 +101,6 @@ impl Renderer {
         let (e1_c, e2_c) = (e1.dot(&d.centre), e2.dot(&d.centre));
         let reject = d.canopy_radius * 1.03;
         let rim_inner = d.canopy_radius - d.rim_width;
-        let inv_canopy_span = 1.0 / (d.canopy_radius - d.inner_radius);
         let r_in2 = d.inner_radius * d.inner_radius;
         for v in b.1..=b.3 {
             // The nearest strut of the previous pixel in the row.
@@ -151,9 +150,7 @@ impl Renderer {
                     continue;
                 }
                 // Canopy: radial shading toward the disc, side light.
-                let radial_f = (rho - d.inner_radius) * inv_canopy_span;
-                let mut val =
-                    d.canopy * (0.82 + 0.18 * clamp01(radial_f)) * (1.0 + 0.06 * x / rho.max(1e-9));
+                let mut val = d.canopy_radiance(rho, x);
                 // Coverage falls with the distance to a strut, so the nearest
                 // strut (on its own side of the centre) decides.
                 let mut perp_min = f64::INFINITY;

@@ -87,6 +87,31 @@ pub struct DrogueView {
     pub rim: f64,
     /// Radiance of the struts, 0..1.
     pub strut: f64,
+    /// Share of the canopy's radiance lost at the disc's edge to the
+    /// throat's shadow (0: none), falling off outward as
+    /// `exp(-(rho - inner_radius) / throat_shade_width)`. A real canopy
+    /// darkens steeply toward the coupling; under blur that steep part lies
+    /// inside the edge's ramp, where a linear shading model cannot see it.
+    pub throat_shade: f64,
+    /// E-folding width of the throat's shadow, metres (> 0).
+    pub throat_shade_width: f64,
+}
+
+impl DrogueView {
+    /// The canopy fabric's radiance at in-plane radius `rho` and in-plane x
+    /// (metres), before struts and the rim band: a gentle linear shading
+    /// from the disc to the rim, the throat's shadow and a side light.
+    #[inline]
+    pub fn canopy_radiance(&self, rho: f64, x: f64) -> f64 {
+        let beyond_disc = (rho - self.inner_radius).max(0.0);
+        let radial_f = (beyond_disc / (self.canopy_radius - self.inner_radius)).min(1.0);
+        let throat = if self.throat_shade > 0.0 && self.throat_shade_width > 0.0 {
+            1.0 - self.throat_shade * (-beyond_disc / self.throat_shade_width).exp()
+        } else {
+            1.0
+        };
+        self.canopy * (0.82 + 0.18 * radial_f) * throat * (1.0 + 0.06 * x / rho.max(1e-9))
+    }
 }
 
 /// Everything one frame needs, in the camera frame.

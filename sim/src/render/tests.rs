@@ -109,9 +109,7 @@ fn reference_drogue(r: &Renderer, rad: &mut [f32], d: &DrogueView, b: PixelBox) 
             if alpha <= 0.0 {
                 continue;
             }
-            let radial_f = (rho - d.inner_radius) / (d.canopy_radius - d.inner_radius);
-            let mut val =
-                d.canopy * (0.82 + 0.18 * clamp01(radial_f)) * (1.0 + 0.06 * x / rho.max(1e-9));
+            let mut val = d.canopy_radiance(rho, x);
             let mut perp_min = f64::INFINITY;
             for &(c, sn) in &strut_dirs {
                 if x * c + y * sn > 0.0 {
@@ -235,6 +233,13 @@ fn drogue_matches_the_every_pixel_reference() {
         for (deg, struts) in [(55.0, 5), (70.0, 3), (30.0, 0)] {
             cases.push((cam.clone(), oblique(&scene.drogue, deg, struts)));
         }
+        // And in its throat's shadow.
+        let shaded = DrogueView {
+            throat_shade: 0.3,
+            throat_shade_width: 0.03,
+            ..scene.drogue
+        };
+        cases.push((cam.clone(), shaded));
     }
     let mut renderers: Vec<(SimCamera, Renderer)> = Vec::new();
     for (cam, d) in &cases {
@@ -257,6 +262,34 @@ fn drogue_matches_the_every_pixel_reference() {
         let diff = max_abs_diff(&fast, &slow);
         assert!(diff < 1e-6, "{d:?}: max difference {diff}");
     }
+}
+
+#[test]
+fn the_throat_shadow_darkens_the_canopy_toward_the_disc() {
+    let (_, scene) = scene_at("approach", 0);
+    let plain = DrogueView {
+        throat_shade: 0.0,
+        ..scene.drogue
+    };
+    let shaded = DrogueView {
+        throat_shade: 0.3,
+        throat_shade_width: 0.02,
+        ..scene.drogue
+    };
+    let r = plain.inner_radius;
+    // At the disc's edge the shadow's share is lost; one e-folding width
+    // out, that share over e; five widths out, under 1 %.
+    for (rho, lost) in [(r, 0.3), (r + 0.02, 0.3 / std::f64::consts::E)] {
+        let ratio = shaded.canopy_radiance(rho, 0.0) / plain.canopy_radiance(rho, 0.0);
+        assert!((1.0 - ratio - lost).abs() < 1e-12, "{rho}: {ratio}");
+    }
+    let far = shaded.canopy_radiance(r + 0.1, 0.05) / plain.canopy_radiance(r + 0.1, 0.05);
+    assert!(far > 0.99 && far < 1.0, "{far}");
+    // Without a shadow, the canopy's own shading: 82 % of its radiance at
+    // the disc, all of it at the rim.
+    let (c, rim) = (plain.canopy, plain.canopy_radius);
+    assert!((plain.canopy_radiance(r, 0.0) - 0.82 * c).abs() < 1e-12);
+    assert!((plain.canopy_radiance(rim, 0.0) - c).abs() < 1e-12);
 }
 
 #[test]

@@ -69,6 +69,8 @@ pub const RANGES: &[(&str, Range)] = &[
     ("drogue.strut_radiance", RADIANCE),
     ("drogue.hose_radiance", RADIANCE),
     ("drogue.probe_radiance", RADIANCE),
+    ("drogue.throat_shade", Range::closed(0.0, 1.0)),
+    ("drogue.throat_shade_width_m", Range::above(0.0, 1.0)),
     ("turbulence.hose_lever_m", Range::above(0.0, 1000.0)),
     ("turbulence.sway_lag_s", Range::above(0.0, 100.0)),
     ("bow_wave.max_push_m", Range::closed(0.0, 10.0)),

@@ -94,6 +94,8 @@ impl Default for DrogueSpec {
             strut_radiance: 0.40,
             hose_radiance: 0.09,
             probe_radiance: 0.16,
+            throat_shade: 0.0,
+            throat_shade_width_m: 0.03,
         }
     }
 }

@@ -30,6 +30,8 @@ pub(super) fn placeholder_drogue() -> DrogueView {
         canopy: 0.72,
         rim: 0.38,
         strut: 0.4,
+        throat_shade: 0.0,
+        throat_shade_width: 0.03,
     }
 }
 
@@ -141,6 +143,8 @@ pub(super) fn lay_out_drogue(
         canopy: 0.72,
         rim: 0.38,
         strut: 0.40,
+        throat_shade: 0.0,
+        throat_shade_width: 0.03,
     };
     // The hose leaves the coupling behind the disc, toward the tanker
     // (ahead and above).

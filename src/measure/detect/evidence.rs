@@ -3,7 +3,9 @@
 //! score that ranks the candidates.
 
 use super::verify::{CLIPPED_SHARE, FillLevels, RimPass};
-use super::{Detector, Reject, SATURATED_GRAY, Verified, angle_gap, canopy, polar_radius, rim};
+use super::{
+    Detector, Reject, SATURATED_GRAY, Verified, angle_gap, canopy, median, polar_radius, rim,
+};
 use crate::measure::ellipse::Ellipse;
 use image::GrayImage;
 use std::f64::consts::TAU;
@@ -35,6 +37,19 @@ const UNJUDGED_MIN_FILL: f64 = 0.8;
 /// disc's candidates rise at most 0.33, the probe's tip inside a hazed disc
 /// 0.68-1.1.)
 const MAX_RISE_BEYOND: f64 = 0.5;
+/// Largest rise beyond the rim, in units of the full step from the disc's
+/// dark level up to the canopy's band, that a shaded canopy gives: a second
+/// condition of [`Reject::Nested`]. A canopy darkened toward the disc by its
+/// throat's shadow has a ring just outside the rim darker than its band by
+/// the shadow's share of the canopy's light: the rim's own step, taken from
+/// that darker ring, then makes the first measure rise past
+/// [`MAX_RISE_BEYOND`] (0.47-0.54 on the simulator's 30 % throat shadow,
+/// every seed) while this one stays at the shadow's depth (0.26-0.30). A
+/// dark shape inside a larger one has the larger one's dark there: nearly
+/// the whole step (0.73-1.3 on the simulator). 0.4 lies between; the
+/// strongest throat shadow the simulator draws takes 30 % of the canopy's
+/// light.
+const MAX_SHADED_RISE: f64 = 0.4;
 /// Rays of [`Detector::rise_beyond`], and its samples: the ring just
 /// outside the rim is [`BEYOND_NEAR_RADII`] of the radius wide, the band
 /// runs from [`BEYOND_FAR_FROM`] of the radius (or the ring's end) to
@@ -120,24 +135,26 @@ impl Detector {
     }
 
     /// How much lighter the canopy's band is than the ring just outside
-    /// the rim, in units of the rim's own contrast: the median over
+    /// the rim ([`Rise`]): the median over
     /// [`BEYOND_RAYS`] rays of (a high level of the band from
     /// [`BEYOND_FAR_FROM`] radii to [`BEYOND_FAR_TO_OUTER`] of the canopy
     /// rim's radius) minus (the median level just past the rim's step, out
     /// to [`BEYOND_NEAR_RADII`] more). Saturated samples (glare) and samples
     /// outside the image are left out; NaN when no ray has enough of either.
     /// `widths` are the rim's step widths by angle, sorted (the ring starts
-    /// past the step's light end).
+    /// past the step's light end), `mids` its mid levels by angle, sorted.
     fn rise_beyond(
         &self,
         image: &GrayImage,
         ellipse: &Ellipse,
         widths: &[(f64, f64)],
+        mids: &[(f64, f32)],
         rim_contrast: f64,
-    ) -> f64 {
+    ) -> Rise {
         let ratio = self.drogue.canopy_radius_m / self.drogue.inner_radius_m;
         let centre = self.camera.distort_px([ellipse.cx, ellipse.cy]);
-        let mut rises = Vec::with_capacity(BEYOND_RAYS);
+        let mut over_step = Vec::with_capacity(BEYOND_RAYS);
+        let mut over_full = Vec::with_capacity(BEYOND_RAYS);
         let (mut near, mut far) = (Vec::new(), Vec::new());
         for k in 0..BEYOND_RAYS {
             let phi = TAU * (k as f64 + 0.5) / BEYOND_RAYS as f64;
@@ -174,13 +191,20 @@ impl Detector {
             // highlight, and the band's shading or a strut's shadow lowers
             // the others.
             let high = far[far.len() - 2];
-            rises.push(f64::from(high - near[near.len() / 2]) / rim_contrast.max(1.0));
+            let rise = f64::from(high - near[near.len() / 2]);
+            over_step.push(rise / rim_contrast.max(1.0));
+            // The disc's dark level on this ray: its rim's mid level less
+            // half the rim's contrast.
+            if let Some(&(_, mid)) = canopy::nearest(mids, phi) {
+                let dark = f64::from(mid) - 0.5 * rim_contrast;
+                over_full.push(rise / (f64::from(high) - dark).max(1.0));
+            }
         }
-        if rises.is_empty() {
-            return f64::NAN;
+        let median_or_nan = |v: &mut Vec<f64>| if v.is_empty() { f64::NAN } else { median(v) };
+        Rise {
+            over_step: median_or_nan(&mut over_step),
+            over_full: median_or_nan(&mut over_full),
         }
-        rises.sort_by(f64::total_cmp);
-        rises[rises.len() / 2]
     }
 
     /// The evidence score of a rim pass (the canopy's outer rim band beyond
@@ -232,9 +256,9 @@ impl Detector {
         // A dark shape inside a larger one (the probe's tip in the disc, a
         // darker patch of it) has the larger one's dark just outside its
         // rim and the canopy beyond: the disc has the canopy itself there.
-        let rise_beyond = self.rise_beyond(image, &ellipse, &widths, rim_contrast);
-        if rise_beyond > MAX_RISE_BEYOND {
-            return Err(Reject::Nested(rise_beyond));
+        let rise = self.rise_beyond(image, &ellipse, &widths, &mids, rim_contrast);
+        if rise.nested() {
+            return Err(Reject::Nested(rise.over_step));
         }
         let edge = canopy::RimEdge {
             min_step_gray: (0.1 * rim_contrast).max(0.5 * self.cfg.min_contrast_gray) as f32,
@@ -266,7 +290,8 @@ impl Detector {
         tracing::debug!(
             centre_px = ?[ellipse.cx.round(), ellipse.cy.round()],
             axes_px = ?[ellipse.a.round(), ellipse.b.round()],
-            rise_beyond,
+            rise_over_step = rise.over_step,
+            rise_over_full = rise.over_full,
             shape,
             fill,
             canopy = ?canopy,
@@ -307,5 +332,28 @@ impl Detector {
             rim_contrast,
             step_widths_px,
         })
+    }
+}
+
+/// How much lighter the canopy's band is than the ring just outside a rim
+/// ([`Detector::rise_beyond`]), median over the rays; NaN where no ray
+/// could be measured.
+#[derive(Clone, Copy, Debug)]
+struct Rise {
+    /// In units of the rim's own step contrast.
+    over_step: f64,
+    /// In units of the full step from the disc's dark level to the band.
+    over_full: f64,
+}
+
+impl Rise {
+    /// A dark shape inside a larger one: the ring just outside is the
+    /// larger shape's dark, so the band rises from it by more than the rim's
+    /// own step allows ([`MAX_RISE_BEYOND`]) and by more than a throat's
+    /// shadow takes from the canopy ([`MAX_SHADED_RISE`]).
+    fn nested(self) -> bool {
+        // An unmeasured full step (NaN) leaves the rim's step to decide.
+        let shaded = self.over_full <= MAX_SHADED_RISE;
+        self.over_step > MAX_RISE_BEYOND && !shaded
     }
 }

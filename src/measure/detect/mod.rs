@@ -244,8 +244,9 @@ enum Reject {
     NoCanopy(f64),
     /// The ring just outside the rim is darker than the canopy's band
     /// beyond it by more than `evidence::MAX_RISE_BEYOND` of the rim's
-    /// contrast (that rise): a dark shape inside a larger one, such as the
-    /// probe's tip inside the disc.
+    /// contrast (that rise) and by more than a throat's shadow takes
+    /// (`evidence::MAX_SHADED_RISE` of the full step from the disc): a dark
+    /// shape inside a larger one, such as the probe's tip inside the disc.
     Nested(f64),
     /// The evidence score is below `min_score`.
     LowScore(f64),

@@ -59,6 +59,9 @@ struct Scene {
     /// A dark circle (centre, radius, level) in front of the disc: the
     /// probe's tip.
     tip: Option<([f64; 2], f64, f64)>,
+    /// The canopy's throat shadow: the share of its level lost at the
+    /// disc's edge, and its e-folding width in disc radii.
+    throat_shadow: Option<(f64, f64)>,
 }
 
 impl Scene {
@@ -76,6 +79,7 @@ impl Scene {
             bite: None,
             sky_level: 130.0,
             tip: None,
+            throat_shadow: None,
         }
     }
 
@@ -117,7 +121,10 @@ impl Scene {
         if self.disc.a > 0.0 && k <= 1.0 {
             self.disc_level
         } else if self.with_canopy && k <= 2.1 {
-            self.canopy_level
+            let shadow = self
+                .throat_shadow
+                .map_or(0.0, |(share, width)| share * (-(k - 1.0) / width).exp());
+            self.canopy_level * (1.0 - shadow)
         } else if self.with_canopy && k <= 2.2 {
             self.band_level
         } else {
@@ -823,6 +830,29 @@ fn the_probes_tip_inside_a_hazed_disc_is_not_the_disc() {
     // And the whole search gives the disc, never the tip.
     let found = detector.detect(&img, None).expect("detected");
     assert!(truth.max_param_error_px(&fit_points(&found)) < 1.0);
+}
+
+#[test]
+fn a_canopy_darkened_toward_the_disc_by_its_throats_shadow_is_no_nested_shape() {
+    // The canopy loses half its level at the disc's edge to the shadow,
+    // recovering over a quarter of the disc's radius (about what the
+    // simulator's 30 % throat shadow does on its canopy's own shading):
+    // measured against the rim's own, lowered, step the canopy then rises
+    // beyond the ring just outside the rim (by 0.54-0.63) as much as around
+    // a dark shape inside a larger one; against the full step from the
+    // disc, by the shadow's depth (0.27-0.31).
+    let (w, h) = (400, 300);
+    let cam = camera(w, h);
+    let truth = Ellipse::new(200.3, 150.4, 45.0, 42.0, 0.3);
+    for (share, width, seed) in [(0.5, 0.3, 2), (0.55, 0.25, 4)] {
+        let mut scene = Scene::new(truth);
+        scene.throat_shadow = Some((share, width));
+        let img = scene.render(w, h, 2.0, seed);
+        let found = detector(&cam)
+            .detect(&img, None)
+            .unwrap_or_else(|| panic!("not detected with a shadow of {share} over {width} radii"));
+        assert!(truth.max_param_error_px(&fit_points(&found)) < 1.0);
+    }
 }
 
 /// The probe's rounded end over the middle of a hazed disc, its shaft
