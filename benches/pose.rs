@@ -80,7 +80,7 @@ fn bench(c: &mut Criterion) {
         let mut t_ns = 0u64;
         b.iter(|| {
             let [s0, s1]: [CirclePose; 2] = cone_pose(black_box(&ellipse), &cam, 0.15).unwrap();
-            let supports = canopy_supports(&image, &cam, &[s0, s1], 0.33);
+            let supports = canopy_supports(&image, &cam, &[s0, s1], 0.33, 0.018);
             t_ns += 33_000_000;
             let choice = tracker.choose([s0, s1], supports, t_ns, &ellipse);
             pose_uncertainty(&ellipse, &cam, &choice.pose, 0.15, &quality, &points)

@@ -103,8 +103,13 @@ fn answer_given_with_fit_error(set_name: &str, sigma_px: f64) -> (Vec<f64>, Vec<
                 e.theta + sigma_px / e.a * gauss(&mut rng),
             );
             let solutions = cone_pose(&disturbed, &camera, t.radius).expect("a pose");
-            let supports =
-                canopy_supports(&image, &camera, &solutions, config.drogue.canopy_radius_m);
+            let supports = canopy_supports(
+                &image,
+                &camera,
+                &solutions,
+                config.drogue.canopy_radius_m,
+                config.drogue.canopy_band_m,
+            );
             let choice = Tracker::new(&config.track)
                 .unwrap()
                 .choose(solutions, supports, 0, &disturbed);
@@ -204,7 +209,13 @@ fn truth_ellipse_gives_truth_pose_and_rim_picks_it(set_name: &str) {
         assert!(alt_n_err < 1e-6, "{name}: alt normal {alt_n_err}");
 
         let image = image::open(set.join(name)).unwrap().to_luma8();
-        let supports = canopy_supports(&image, &camera, &solutions, canopy_radius);
+        let supports = canopy_supports(
+            &image,
+            &camera,
+            &solutions,
+            canopy_radius,
+            Config::embedded().drogue.canopy_band_m,
+        );
         let mut tracker = Tracker::new(&config.track).unwrap();
         let choice = tracker.choose(solutions, supports, 0, &ellipse);
         println!(

@@ -14,7 +14,9 @@
 //! against the lighter canopy) has the opposite polarity and is not counted.
 //! Heavy haze can lift the band above a darker sky; when the brightening edge
 //! leaves the rim unsupported, the outermost darkening edge is tried (see
-//! [`canopy_supports`]).
+//! [`canopy_supports`]). Heavier haze gives the band the sky's own level:
+//! then the canopy's end, darkening outward a band's width inside the rim,
+//! is looked for there.
 //!
 //! Far away the two predictions merge: the image is then nearly affine, and
 //! an affine view maps the concentric rim of both solutions to the same
@@ -95,6 +97,9 @@ enum Polarity {
     /// The outermost outward darkening is the edge: the band's inner side
     /// (canopy to band) darkens outward too, a band's width further in.
     Darkening,
+    /// The strongest outward darkening is the edge: the canopy's light
+    /// fabric ending at the band, looked for a band's width inside the rim.
+    CanopyEnd,
 }
 
 /// Grey values sampled across a predicted rim point, outward.
@@ -127,14 +132,14 @@ fn edge_offset(grey: &AcrossProfile, polarity: Polarity) -> Option<f64> {
     // Central difference over 2 px at each searched offset.
     let sign = match polarity {
         Polarity::Brightening => 1.0,
-        Polarity::Darkening => -1.0,
+        Polarity::Darkening | Polarity::CanopyEnd => -1.0,
     };
     let mut gradient = [0.0; SEARCH_STEPS];
     for (i, g) in gradient.iter_mut().enumerate() {
         *g = sign * f64::from(grey[i + 2 * STEPS_PER_PX] - grey[i]) / 2.0;
     }
     let found = match polarity {
-        Polarity::Brightening => gradient
+        Polarity::Brightening | Polarity::CanopyEnd => gradient
             .iter()
             .enumerate()
             .max_by(|a, b| a.1.total_cmp(b.1))
@@ -214,30 +219,51 @@ pub fn canopy_support(
 /// The edge is an outward brightening (the band against the sky); when
 /// that leaves the rim without a say or its better solution below
 /// `DARKENING_FALLBACK_BELOW`, the outward darkening of a band lifted by
-/// haze above the sky is tried, and the polarity whose better solution has
-/// more support answers.
+/// haze above the sky is tried, and then (still below, and `band_m` > 0)
+/// the strongest outward darkening `band_m` inside the rim: the canopy's
+/// end where haze has given the band the sky's level. The answer whose
+/// better solution has the most support is given.
 pub fn canopy_supports(
     image: &GrayImage,
     camera: &CameraModel,
     solutions: &[CirclePose; 2],
     canopy_radius_m: f64,
+    band_m: f64,
 ) -> [Option<f64>; 2] {
     let rims = solutions.map(|pose| predicted_rim(camera, &pose, canopy_radius_m));
     let [Some(rim0), Some(rim1)] = &rims else {
         return [None, None];
     };
     let best = |s: &[Option<f64>; 2]| s.iter().flatten().copied().reduce(f64::max);
+    // Of two answers, the one whose better solution has more support (the
+    // first on a tie, or when the second has no say).
+    let better = |a: [Option<f64>; 2], b: [Option<f64>; 2]| match (best(&a), best(&b)) {
+        (_, None) => a,
+        (Some(x), Some(y)) if x >= y => a,
+        _ => b,
+    };
     let profiles = [rim_profiles(image, rim0), rim_profiles(image, rim1)];
     let bright = supports_with(&profiles, [rim0, rim1], Polarity::Brightening);
     if best(&bright).is_some_and(|b| b >= DARKENING_FALLBACK_BELOW) {
         return bright;
     }
     let dark = supports_with(&profiles, [rim0, rim1], Polarity::Darkening);
-    match (best(&bright), best(&dark)) {
-        (_, None) => bright,
-        (Some(b), Some(d)) if b >= d => bright,
-        _ => dark,
+    let answer = better(bright, dark);
+    let has_band = band_m > 0.0;
+    if best(&answer).is_some_and(|b| b >= DARKENING_FALLBACK_BELOW) || !has_band {
+        return answer;
     }
+    // Heavy haze gives the band the sky's own level: the canopy then ends,
+    // darkening outward, a band's width inside the rim.
+    let ends = solutions.map(|pose| predicted_rim(camera, &pose, canopy_radius_m - band_m));
+    let [Some(end0), Some(end1)] = &ends else {
+        return answer;
+    };
+    let end_profiles = [rim_profiles(image, end0), rim_profiles(image, end1)];
+    better(
+        answer,
+        supports_with(&end_profiles, [end0, end1], Polarity::CanopyEnd),
+    )
 }
 
 /// [`canopy_supports`] for one polarity of the rim's edge, from the two
@@ -456,6 +482,9 @@ mod tests {
         vga_camera([0.0; 5])
     }
 
+    /// Width of the painted drogue's dark band at the rim, metres.
+    const BAND_M: f64 = 0.03;
+
     /// Paints a synthetic drogue, exact per pixel centre: sky 170, canopy 150,
     /// dark band at the rim (r in [0.30, 0.33]) 70, inner circle 30.
     fn render(cam: &CameraModel, pose: &CirclePose) -> GrayImage {
@@ -482,13 +511,8 @@ mod tests {
         })
     }
 
-    /// Under haze the band (150) is lighter than the sky (130): the
-    /// brightening test sees no rim, the darkening one tells the true pose
-    /// from its mirror, and neither takes the canopy-to-band edge (r = 0.30,
-    /// also darkening outward) for the rim.
-    #[test]
-    fn a_hazy_rim_that_darkens_outward_decides_for_the_true_pose() {
-        let cam = camera();
+    /// A drogue 3 m away tilted about 36 degrees, and its mirror pose.
+    fn tilted_and_mirrored() -> [CirclePose; 2] {
         let n = nalgebra::Rotation3::new(Vector3::new(0.0, 0.6, 0.2)) * -Vector3::z();
         let truth = CirclePose {
             centre_camera_m: Point::new(Vector3::new(0.1, -0.05, 3.0)),
@@ -498,14 +522,45 @@ mod tests {
             normal_camera: Direction::new(Vector3::new(-n.x, -n.y, n.z).normalize()),
             ..truth
         };
+        [truth, mirrored]
+    }
+
+    /// Under haze the band (150) is lighter than the sky (130): the
+    /// brightening test sees no rim, the darkening one tells the true pose
+    /// from its mirror, and neither takes the canopy-to-band edge (r = 0.30,
+    /// also darkening outward) for the rim.
+    #[test]
+    fn a_hazy_rim_that_darkens_outward_decides_for_the_true_pose() {
+        let cam = camera();
+        let [truth, mirrored] = tilted_and_mirrored();
         let image = render_levels(&cam, &truth, [110, 180, 150, 130]);
         let bright = canopy_support(&image, &cam, &truth, 0.33).unwrap();
         assert!(bright < 0.1, "brightening support {bright}");
-        let [t, m] = canopy_supports(&image, &cam, &[truth, mirrored], 0.33);
+        let [t, m] = canopy_supports(&image, &cam, &[truth, mirrored], 0.33, BAND_M);
         let (t, m) = (t.expect("decided"), m.expect("decided"));
         assert!(t > 0.9 && m < 0.5, "true {t}, mirror {m}");
-        let [t, m] = canopy_supports(&image, &cam, &[mirrored, truth], 0.33);
+        let [t, m] = canopy_supports(&image, &cam, &[mirrored, truth], 0.33, BAND_M);
         assert!(t.unwrap() < 0.5 && m.unwrap() > 0.9, "order swapped");
+    }
+
+    /// Under heavy haze the band takes the sky's own level (130): there is
+    /// no edge at the rim at all, only the canopy ending, darkening
+    /// outward, a band's width inside it. Looked for there, it tells the
+    /// true pose from its mirror; without the band's width, nothing does.
+    #[test]
+    fn a_hazy_canopy_whose_band_has_the_sky_level_decides_by_its_end() {
+        let cam = camera();
+        let [truth, mirrored] = tilted_and_mirrored();
+        let image = render_levels(&cam, &truth, [110, 180, 130, 130]);
+        let [t, m] = canopy_supports(&image, &cam, &[truth, mirrored], 0.33, BAND_M);
+        let (t, m) = (t.expect("decided"), m.expect("decided"));
+        assert!(t > 0.9 && m < 0.5, "true {t}, mirror {m}");
+        let [t, m] = canopy_supports(&image, &cam, &[mirrored, truth], 0.33, BAND_M);
+        assert!(t.unwrap() < 0.5 && m.unwrap() > 0.9, "order swapped");
+        assert_eq!(
+            canopy_supports(&image, &cam, &[truth, mirrored], 0.33, 0.0),
+            [None, None]
+        );
     }
 
     #[test]
@@ -567,7 +622,7 @@ mod tests {
         // 2 m: the predicted rims are pixels apart; the truth has the edges.
         let near = on_axis_pair(2.0);
         let image = render(&cam, &near[0]);
-        let [s0, s1] = canopy_supports(&image, &cam, &near, 0.33);
+        let [s0, s1] = canopy_supports(&image, &cam, &near, 0.33, BAND_M);
         let (s0, s1) = (s0.unwrap(), s1.unwrap());
         assert!(s0 > 0.9 && s1 < 0.1, "near: {s0} {s1}");
         // 10 m (a 26 px rim at f = 800 px): the two rims are within half a
@@ -577,7 +632,10 @@ mod tests {
         let image = render(&cam, &far[0]);
         let whole = far.map(|p| canopy_support(&image, &cam, &p, 0.33).unwrap());
         assert!(whole[0] > 0.8 && whole[1] > 0.8, "{whole:?}");
-        assert_eq!(canopy_supports(&image, &cam, &far, 0.33), [None, None]);
+        assert_eq!(
+            canopy_supports(&image, &cam, &far, 0.33, BAND_M),
+            [None, None]
+        );
     }
 
     #[test]

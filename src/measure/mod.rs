@@ -158,6 +158,7 @@ pub struct Measurer {
     camera: CameraModel,
     inner_radius_m: f64,
     canopy_radius_m: f64,
+    canopy_band_m: f64,
     detector: detect::Detector,
     fitter: fit::Fitter,
     mount: mount::Mount,
@@ -194,6 +195,7 @@ impl Measurer {
             tracker: track::Tracker::new(&config.track).map_err(MeasureSetupError::Track)?,
             inner_radius_m: d.inner_radius_m,
             canopy_radius_m: d.canopy_radius_m,
+            canopy_band_m: d.canopy_band_m,
             camera,
             mount,
         })
@@ -261,6 +263,7 @@ impl Measurer {
                 &self.camera,
                 &[first, second],
                 self.canopy_radius_m,
+                self.canopy_band_m,
             );
             let choice = self.tracker.choose(
                 [first, second],
