@@ -258,12 +258,19 @@ impl Measurer {
                 tracing::debug!(seq = frame.seq, "not detected: no pose from the ellipse");
                 return None;
             };
-            let canopy_scores = ambiguity::canopy_supports(
+            let smeared = ambiguity::SmearedRim::new(
+                self.camera
+                    .distort_px([fitted.ellipse.cx, fitted.ellipse.cy]),
+                &cand.rim_points_px,
+                &cand.rim_step_widths_px,
+            );
+            let canopy_scores = ambiguity::canopy_supports_where(
                 &frame.image,
                 &self.camera,
                 &[first, second],
                 self.canopy_radius_m,
                 self.canopy_band_m,
+                |p| !smeared.at(p),
             );
             let choice = self.tracker.choose(
                 [first, second],
