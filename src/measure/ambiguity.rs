@@ -379,8 +379,9 @@ impl<'a> RimEvidence<'a> {
     }
 }
 
-/// [`canopy_supports`] for one polarity of the rim's edge, from the two
-/// rims' [`rim_profiles`].
+/// [`canopy_supports`] for one polarity of the rim's edge, from the edges
+/// found on the two rims (`offsets`, [`edge_offsets`]), judged on the
+/// points `judge` takes.
 fn supports_with(
     offsets: &[EdgeOffsets; 2],
     [rim0, rim1]: [&[RimPoint]; 2],
@@ -598,14 +599,16 @@ pub struct SmearedRim {
     centre: [f64; 2],
     /// (angle, width) of the rim steps, sorted by angle.
     widths: Vec<(f64, f64)>,
+    /// Steps wider than this are smeared (infinite: no blur to speak of).
     limit_px: f64,
 }
 
 impl SmearedRim {
     /// A blur shorter than this leaves every point judged: shorter than the
     /// band searched across the predicted rim (`2 * SEARCH_PX`), it leaves
-    /// the edge's steepest point within it. (At 3 px the simulator's 4 px
-    /// blur lost resolutions on six of nine seeds; at 6 px none.)
+    /// the edge's steepest point within it. (Tried at 3 px with the judged
+    /// points alone, before the whole rim was kept first: the simulator's
+    /// 4 px blur lost resolutions on six of nine seeds; at 6 px none.)
     const MIN_BLUR_PX: f64 = 2.0 * SEARCH_PX;
 
     /// From the disc's rim points (`points`, distorted pixels, about

@@ -258,6 +258,8 @@ impl Measurer {
                 tracing::debug!(seq = frame.seq, "not detected: no pose from the ellipse");
                 return None;
             };
+            // Where a motion blur smears the disc's rim (its steps' widths),
+            // the canopy's rim is smeared too.
             let smeared = ambiguity::SmearedRim::new(
                 self.camera
                     .distort_px([fitted.ellipse.cx, fitted.ellipse.cy]),
