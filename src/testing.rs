@@ -181,11 +181,7 @@ pub fn camera_from_sim(cam: &SimCamera, name: &str) -> CameraModel {
 
 /// The drogue's two circles and its canopy's band as `config` gives them.
 pub fn drogue_circles(config: &Config) -> DrogueCircles {
-    DrogueCircles {
-        inner_radius_m: config.drogue.inner_radius_m,
-        canopy_radius_m: config.drogue.canopy_radius_m,
-        canopy_band_m: config.drogue.canopy_band_m,
-    }
+    config.drogue.circles()
 }
 
 /// A detector with `config`'s settings and drogue, for `camera`.

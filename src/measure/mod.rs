@@ -34,6 +34,17 @@ pub struct DrogueConfig {
     pub canopy_band_m: f64,
 }
 
+impl DrogueConfig {
+    /// The drogue's circles and band, as the detector takes them.
+    pub fn circles(&self) -> detect::canopy::DrogueCircles {
+        detect::canopy::DrogueCircles {
+            inner_radius_m: self.inner_radius_m,
+            canopy_radius_m: self.canopy_radius_m,
+            canopy_band_m: self.canopy_band_m,
+        }
+    }
+}
+
 /// What the measurement needs from the configuration, and nothing more: the
 /// `[drogue]`, `[mount]`, `[detect]`, `[fit]` and `[track]` sections (see
 /// `Config::measure`). Kept apart so that the measurement depends on no
@@ -156,9 +167,7 @@ pub enum MeasureSetupError {
 #[derive(Clone)]
 pub struct Measurer {
     camera: CameraModel,
-    inner_radius_m: f64,
-    canopy_radius_m: f64,
-    canopy_band_m: f64,
+    drogue: DrogueConfig,
     detector: detect::Detector,
     fitter: fit::Fitter,
     mount: mount::Mount,
@@ -182,20 +191,10 @@ impl Measurer {
         }
         let mount = mount::Mount::from_config(&config.mount).map_err(MeasureSetupError::Mount)?;
         Ok(Self {
-            detector: detect::Detector::new(
-                &config.detect,
-                &camera,
-                detect::canopy::DrogueCircles {
-                    inner_radius_m: d.inner_radius_m,
-                    canopy_radius_m: d.canopy_radius_m,
-                    canopy_band_m: d.canopy_band_m,
-                },
-            ),
+            detector: detect::Detector::new(&config.detect, &camera, d.circles()),
             fitter: fit::Fitter::new(&config.fit),
             tracker: track::Tracker::new(&config.track).map_err(MeasureSetupError::Track)?,
-            inner_radius_m: d.inner_radius_m,
-            canopy_radius_m: d.canopy_radius_m,
-            canopy_band_m: d.canopy_band_m,
+            drogue: d.clone(),
             camera,
             mount,
         })
@@ -253,7 +252,7 @@ impl Measurer {
 
             let t = Instant::now();
             let Some([first, second]) =
-                pose::cone_pose(&fitted.ellipse, &self.camera, self.inner_radius_m)
+                pose::cone_pose(&fitted.ellipse, &self.camera, self.drogue.inner_radius_m)
             else {
                 tracing::debug!(seq = frame.seq, "not detected: no pose from the ellipse");
                 return None;
@@ -270,8 +269,8 @@ impl Measurer {
                 &frame.image,
                 &self.camera,
                 &[first, second],
-                self.canopy_radius_m,
-                self.canopy_band_m,
+                self.drogue.canopy_radius_m,
+                self.drogue.canopy_band_m,
                 |p| !smeared.at(p),
             );
             let choice = self.tracker.choose(
@@ -308,7 +307,7 @@ impl Measurer {
                 &fitted.ellipse,
                 &self.camera,
                 &choice.pose,
-                self.inner_radius_m,
+                self.drogue.inner_radius_m,
                 &quality,
                 &inlier_points,
                 inlier_widths.as_deref(),

@@ -6,7 +6,6 @@
 use drogue_sim::sweep::{Sweep, standard_levels};
 use drogue_vision::config::Config;
 use drogue_vision::measure::detect::Detector;
-use drogue_vision::measure::detect::canopy::DrogueCircles;
 use drogue_vision::testing;
 
 /// One frame's verified candidates.
@@ -35,11 +34,7 @@ const SAME_SIZE: f64 = 0.15;
 /// exit (`Detector::scored_candidates`), with the embedded configuration.
 pub fn scored_frames(seed: u64, frames: u64) -> Vec<ScoredFrame> {
     let config = Config::embedded().measure();
-    let circles = DrogueCircles {
-        inner_radius_m: config.drogue.inner_radius_m,
-        canopy_radius_m: config.drogue.canopy_radius_m,
-        canopy_band_m: config.drogue.canopy_band_m,
-    };
+    let circles = config.drogue.circles();
     let mut detectors: Vec<([f64; 5], Detector)> = Vec::new();
     let mut sim = Sweep::new(seed);
     let mut out = Vec::new();
