@@ -278,12 +278,20 @@ type EdgeOffsets = Vec<Option<Option<f64>>>;
 /// and, once asked for, the edges found on them by polarity.
 struct CurvePair {
     rims: [Vec<RimPoint>; 2],
+    /// Each rim point's distance to the other solution's rim, pixels.
+    apart_px: [Vec<f64>; 2],
     profiles: [Vec<Option<AcrossProfile>>; 2],
     offsets: [Option<[EdgeOffsets; 2]>; 3],
 }
 
 impl CurvePair {
-    /// The two solutions' circles of `radius_m`, when both can be judged.
+    /// The two solutions' circles of `radius_m`, when both can be judged:
+    /// both rims big enough, and each with [`MIN_DISCRIMINATING`] points at
+    /// least [`MIN_SEPARATION_PX`] from the other rim. Without those points
+    /// no polarity and no choice of points can tell the solutions apart
+    /// ([`supports_with`] needs them), so the profiles are not taken: far
+    /// away, where the rims merge, that is most of a tracked frame's
+    /// ambiguity test.
     fn new(
         image: &GrayImage,
         camera: &CameraModel,
@@ -294,9 +302,18 @@ impl CurvePair {
         else {
             return None;
         };
+        let apart_px = [
+            distances_to_rim(&rim0, &rim1),
+            distances_to_rim(&rim1, &rim0),
+        ];
+        let telling = |d: &[f64]| d.iter().filter(|&&d| d >= MIN_SEPARATION_PX).count();
+        if apart_px.iter().any(|d| telling(d) < MIN_DISCRIMINATING) {
+            return None;
+        }
         let profiles = [rim_profiles(image, &rim0), rim_profiles(image, &rim1)];
         Some(Self {
             rims: [rim0, rim1],
+            apart_px,
             profiles,
             offsets: [None, None, None],
         })
@@ -310,8 +327,7 @@ impl CurvePair {
         let profiles = &self.profiles;
         let offsets = self.offsets[polarity as usize]
             .get_or_insert_with(|| profiles.each_ref().map(|p| edge_offsets(p, polarity)));
-        let [rim0, rim1] = &self.rims;
-        supports_with(offsets, [rim0, rim1], judge)
+        supports_with(offsets, &self.rims, &self.apart_px, judge)
     }
 }
 
@@ -380,11 +396,13 @@ impl<'a> RimEvidence<'a> {
 }
 
 /// [`canopy_supports`] for one polarity of the rim's edge, from the edges
-/// found on the two rims (`offsets`, [`edge_offsets`]), judged on the
-/// points `judge` takes.
+/// found on the two rims (`offsets`, [`edge_offsets`]) and each rim
+/// point's distance to the other rim (`apart_px`), judged on the points
+/// `judge` takes.
 fn supports_with(
     offsets: &[EdgeOffsets; 2],
-    [rim0, rim1]: [&[RimPoint]; 2],
+    rims: &[Vec<RimPoint>; 2],
+    apart_px: &[Vec<f64>; 2],
     judge: impl Fn([f64; 2]) -> bool,
 ) -> [Option<f64>; 2] {
     let in_image = |o: &[Option<Option<f64>>]| o.iter().filter(|x| x.is_some()).count();
@@ -413,22 +431,11 @@ fn supports_with(
         (found[better].iter().map(|x| x * x).sum::<f64>() / found[better].len() as f64).sqrt()
     };
     let min_separation = (SEPARATION_SIGMAS * scatter).max(MIN_SEPARATION_PX);
-    let apart = |from: &[RimPoint], to: &[RimPoint]| -> Vec<bool> {
-        let mut near = None;
-        from.iter()
-            .map(|p| {
-                let (d, k) = distance_to_rim(p.at, to, near);
-                near = Some(k);
-                d >= min_separation
-            })
-            .collect()
-    };
-    let apart = [apart(rim0, rim1), apart(rim1, rim0)];
-    let apart = [(0, rim0), (1, rim1)].map(|(i, rim)| {
-        apart[i]
+    let apart = [0, 1].map(|i| {
+        apart_px[i]
             .iter()
-            .zip(rim)
-            .map(|(&a, p)| a && judge(p.at))
+            .zip(&rims[i])
+            .map(|(&d, p)| d >= min_separation && judge(p.at))
             .collect::<Vec<bool>>()
     });
     let mut judged = [0usize; 2];
@@ -449,6 +456,20 @@ fn supports_with(
         return [None, None];
     }
     [Some(b / judged[0] as f64), Some(c / judged[1] as f64)]
+}
+
+/// Distance of each point of `from` to the closed polyline through `to`,
+/// pixels ([`distance_to_rim`], each query starting from the last one's
+/// nearest point).
+fn distances_to_rim(from: &[RimPoint], to: &[RimPoint]) -> Vec<f64> {
+    let mut near = None;
+    from.iter()
+        .map(|p| {
+            let (d, k) = distance_to_rim(p.at, to, near);
+            near = Some(k);
+            d
+        })
+        .collect()
 }
 
 /// Per rim point, its [`across_profile`] (`None`: outside the image).
