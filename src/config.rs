@@ -41,6 +41,10 @@ pub const RANGES: &[(&str, Range)] = &[
     ("detect.min_axis_ratio", Range::above(0.0, 1.0)),
     ("detect.min_contrast_gray", Range::closed(0.0, 255.0)),
     ("detect.rim_point_spacing_px", Range::closed(0.1, 100.0)),
+    (
+        "detect.tracked_rim_point_spacing_px",
+        Range::closed(0.1, 100.0),
+    ),
     ("detect.max_rim_points", Range::closed(5.0, 10_000.0)),
     (
         "detect.tracked_max_rim_points",

@@ -309,31 +309,60 @@ impl Detector {
         if score < self.cfg.min_score {
             return Err(Reject::LowScore(score));
         }
-        // Keep the points near the ellipse: the probe and hose outlines are
-        // the fit's outliers, and fewer of them is better.
+        let measured = MeasuredRim::near(
+            &ellipse,
+            tol,
+            &residuals,
+            measured_px,
+            measured_undistorted,
+            step_widths_px,
+        );
+        Ok(Verified {
+            ellipse,
+            points_px: measured.points_px,
+            undistorted: measured.undistorted,
+            score,
+            rim_contrast,
+            step_widths_px: measured.step_widths_px,
+        })
+    }
+}
+
+/// The points a pass gives the pose to be measured from, with their step
+/// widths (distorted and undistorted pixels, aligned).
+pub(super) struct MeasuredRim {
+    pub(super) points_px: Vec<[f64; 2]>,
+    pub(super) undistorted: Vec<[f64; 2]>,
+    pub(super) step_widths_px: Vec<f64>,
+}
+
+impl MeasuredRim {
+    /// The measured points of a pass (`measured_px`, `undistorted`, with
+    /// their `step_widths_px`) whose edge lies near the pass's `ellipse`
+    /// (`residuals`, its tolerance `tol`): the probe and hose outlines are
+    /// the fit's outliers, and fewer of them is better.
+    pub(super) fn near(
+        ellipse: &Ellipse,
+        tol: f64,
+        residuals: &[f64],
+        measured_px: Vec<[f64; 2]>,
+        undistorted: Vec<[f64; 2]>,
+        step_widths_px: Vec<f64>,
+    ) -> Self {
         let keep = (0.05 * ellipse.a).max(3.0 * tol);
-        let near = |points: Vec<[f64; 2]>| -> Vec<[f64; 2]> {
-            points
+        fn near<T>(items: Vec<T>, residuals: &[f64], keep: f64) -> Vec<T> {
+            items
                 .into_iter()
-                .zip(&residuals)
+                .zip(residuals)
                 .filter(|(_, r)| **r <= keep)
                 .map(|(p, _)| p)
                 .collect()
-        };
-        let step_widths_px = step_widths_px
-            .into_iter()
-            .zip(&residuals)
-            .filter(|(_, r)| **r <= keep)
-            .map(|(w, _)| w)
-            .collect();
-        Ok(Verified {
-            ellipse,
-            points_px: near(measured_px),
-            undistorted: near(measured_undistorted),
-            score,
-            rim_contrast,
-            step_widths_px,
-        })
+        }
+        Self {
+            points_px: near(measured_px, residuals, keep),
+            undistorted: near(undistorted, residuals, keep),
+            step_widths_px: near(step_widths_px, residuals, keep),
+        }
     }
 }
 

@@ -39,7 +39,7 @@ use coarse::{Blob, BlobFinder, Decimated, LocalContrast};
 use image::GrayImage;
 use serde::{Deserialize, Serialize};
 use std::f64::consts::TAU;
-use verify::RimUse;
+use verify::{RimUse, VERIFY_SPACING_PX};
 
 /// Detection tunables (`[detect]` in the config).
 #[derive(Clone, Debug, Serialize, Deserialize)]
@@ -61,8 +61,11 @@ pub struct DetectConfig {
     pub min_axis_ratio: f64,
     /// Smallest dark-to-light step at the rim, gray levels.
     pub min_contrast_gray: f64,
-    /// Spacing of the rim rays along the rim, pixels.
+    /// Spacing of the rim rays along the rim on the pass the pose is
+    /// measured from after a full-frame search, pixels.
     pub rim_point_spacing_px: f64,
+    /// The same on a tracked frame, which verifies and measures in one pass.
+    pub tracked_rim_point_spacing_px: f64,
     /// Most rim points per frame.
     pub max_rim_points: u32,
     /// Most rim points on a tracked frame (searched near the predicted
@@ -389,7 +392,7 @@ impl Detector {
             match self.verify_settled(
                 image,
                 h,
-                self.cfg.rim_point_spacing_px,
+                self.cfg.tracked_rim_point_spacing_px,
                 self.cfg.tracked_max_rim_points,
                 RimUse::Measure,
             ) {
@@ -435,13 +438,14 @@ impl Detector {
         // points: a candidate that passed on the sparse rim only by the
         // luck of where its rays fell is not the drogue.
         verified.sort_by(|x, y| y.score.total_cmp(&x.score));
-        let spacing = self.cfg.rim_point_spacing_px;
+        let measure_spacing = self.cfg.rim_point_spacing_px;
+        let verify_spacing = VERIFY_SPACING_PX.max(measure_spacing);
         let max_points = self.cfg.max_rim_points;
-        verified.into_iter().find_map(|scouted| {
+        let found = verified.into_iter().find_map(|scouted| {
             match self.verify_settled(
                 image,
                 &scouted.ellipse,
-                spacing,
+                verify_spacing,
                 max_points,
                 RimUse::Measure,
             ) {
@@ -455,7 +459,54 @@ impl Detector {
                     None
                 }
             }
-        })
+        })?;
+        if measure_spacing >= verify_spacing {
+            return Some(found);
+        }
+        Some(self.measured_densely(image, found, measure_spacing, max_points))
+    }
+
+    /// `found` with its points taken again on rays `spacing_px` apart (one
+    /// narrow pass about its ellipse, placed as the verifying pass places
+    /// them); `found` as it was when that pass fails its checks.
+    fn measured_densely(
+        &mut self,
+        image: &GrayImage,
+        found: Verified,
+        spacing_px: f64,
+        max_points: u32,
+    ) -> Verified {
+        match self.rim_pass(
+            image,
+            &found.ellipse,
+            spacing_px,
+            max_points,
+            RimUse::Measure,
+        ) {
+            Ok(pass) => {
+                let measured = evidence::MeasuredRim::near(
+                    &pass.ellipse,
+                    pass.tolerance,
+                    &pass.residuals,
+                    pass.measured_px,
+                    pass.measured_undistorted,
+                    pass.step_widths_px,
+                );
+                Verified {
+                    points_px: measured.points_px,
+                    undistorted: measured.undistorted,
+                    step_widths_px: measured.step_widths_px,
+                    ..found
+                }
+            }
+            Err(why) => {
+                tracing::debug!(
+                    ?why,
+                    "the dense measuring pass failed: the verifying pass's points kept"
+                );
+                found
+            }
+        }
     }
 }
 

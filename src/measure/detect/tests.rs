@@ -890,33 +890,52 @@ fn a_probe_ending_inside_a_hazed_disc_leaves_the_disc_found() {
 
 /// `rim_point_spacing_px` sets the density of the measuring pass only: a ray
 /// on every pixel of the rim (1 px) instead of every other one (the
-/// default, 2 px) finds the same discs (candidates are compared on rays
-/// 6 px apart either way) and measures their centre closer: at least as
-/// much as the square root of the number of rays says for independent
-/// pixels' noise (0.71; 0.49 on these 16 noise draws, 0.025 -> 0.012 px).
+/// default, 2 px) finds the same disc, verified on the same 2 px rays (the
+/// detector's own ellipse is the very same), and the ellipse fitted to its
+/// points is closer: at least as much as the square root of the number of
+/// rays says for independent pixels' noise (0.71; 0.48 on these 16 noise
+/// draws, 0.025 -> 0.012 px rms).
 #[test]
 fn a_ray_on_every_rim_pixel_measures_the_centre_closer() {
     let (w, h) = (320, 240);
     let cam = camera(w, h);
     let truth = Ellipse::new(158.3, 121.6, 38.0, 31.0, 0.4);
     let cfg = Config::embedded();
+    let sparse_cfg = cfg.detect.clone();
+    assert_eq!(sparse_cfg.rim_point_spacing_px, 2.0, "the default spacing");
     let mut dense_cfg = cfg.detect.clone();
     dense_cfg.rim_point_spacing_px = 1.0;
-    assert_eq!(cfg.detect.rim_point_spacing_px, 2.0, "the default spacing");
     let circles = crate::testing::drogue_circles(&cfg);
+    let mut fitter = crate::measure::fit::Fitter::new(&cfg.fit);
     let (mut sparse, mut dense) = (0.0, 0.0);
     let draws = 16;
     for seed in 0..draws {
         let img = Scene::new(truth).render(w, h, 8.0, 300 + seed);
-        let centre_error = |detector: &mut Detector| {
-            let e = detector
+        let found = |detect: &DetectConfig| {
+            Detector::new(detect, &cam, circles)
                 .detect(&img, None)
                 .expect("the disc is found")
-                .ellipse_px;
+        };
+        let (sparse_found, dense_found) = (found(&sparse_cfg), found(&dense_cfg));
+        assert_eq!(
+            dense_found.ellipse_px, sparse_found.ellipse_px,
+            "seed {seed}: the same disc, verified on the same rays"
+        );
+        assert!(
+            dense_found.rim_points_px.len() > 3 * sparse_found.rim_points_px.len() / 2,
+            "seed {seed}: {} points at 1 px, {} at 2 px",
+            dense_found.rim_points_px.len(),
+            sparse_found.rim_points_px.len()
+        );
+        let mut centre_error = |c: &RimCandidate| {
+            let e = fitter
+                .fit(&c.rim_points_undistorted_px, seed)
+                .expect("an ellipse through the rim")
+                .ellipse;
             (e.cx - truth.cx).powi(2) + (e.cy - truth.cy).powi(2)
         };
-        sparse += centre_error(&mut Detector::new(&cfg.detect, &cam, circles));
-        dense += centre_error(&mut Detector::new(&dense_cfg, &cam, circles));
+        sparse += centre_error(&sparse_found);
+        dense += centre_error(&dense_found);
     }
     let ratio = (dense / sparse).sqrt();
     let rms = (sparse / draws as f64).sqrt();

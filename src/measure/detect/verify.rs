@@ -17,6 +17,13 @@ use std::f64::consts::TAU;
 /// measured, not which candidates are found.
 const SCOUT_SPACING_PX: f64 = 6.0;
 
+/// Rim ray spacing of the pass that verifies the chosen candidate again at
+/// full density, pixels (or the configured spacing, if sparser). Fixed for
+/// the same reason: a denser measuring pass (`rim_point_spacing_px`)
+/// follows the verification and changes what is measured, not which
+/// candidate is the drogue.
+pub(super) const VERIFY_SPACING_PX: f64 = 2.0;
+
 /// Narrow-pass windows are widened by this factor while more than
 /// [`CLIPPED_SHARE`] of the steps run into their ends (blur), up to
 /// [`MAX_WIDEN`] times, and at most to [`MAX_WIDE_MARGIN_RADII`] of the
@@ -401,7 +408,7 @@ impl Detector {
 
     /// The narrow ray pass around `start` and the robust refit, with the
     /// checks of the rim itself (size, shape, contrast, one dark inside).
-    fn rim_pass(
+    pub(super) fn rim_pass(
         &mut self,
         image: &GrayImage,
         start: &Ellipse,

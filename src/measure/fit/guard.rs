@@ -23,11 +23,18 @@ const HIDDEN_GAP_FACTOR: f64 = 2.5;
 /// an otherwise visible rim, and its neighbours are as good as any.
 const MIN_OUTLIER_RUN: usize = 2;
 
+/// How far along the rim from a hidden stretch an edge is pulled by the
+/// occluder's outline, pixels: the profile's footprint (the bilinear
+/// samples' and the optics' spread). One ray each side at the default
+/// 2 px spacing, two at 1 px.
+const OCCLUDER_PULL_PX: f64 = 2.0;
+
 /// Flags, per point, the inliers next to a hidden stretch of rim (in the
-/// points' angular order about `centre`): the neighbour across a gap wider
-/// than [`HIDDEN_GAP_FACTOR`] median gaps, and the inlier next to a run of
-/// at least [`MIN_OUTLIER_RUN`] outliers. Outliers and non-finite points are
-/// never flagged (they are out of the fit already).
+/// points' angular order about `centre`): those within
+/// [`OCCLUDER_PULL_PX`] along the rim (at least the nearest one) of a gap
+/// wider than [`HIDDEN_GAP_FACTOR`] median gaps or of a run of at least
+/// [`MIN_OUTLIER_RUN`] outliers. Outliers and non-finite points are never
+/// flagged (they are out of the fit already).
 pub(crate) fn beside_hidden_rim(
     points: &[[f64; 2]],
     centre: [f64; 2],
@@ -38,6 +45,7 @@ pub(crate) fn beside_hidden_rim(
         return flagged;
     };
     let m = rim.order.len();
+    let reach = rim.neighbours_within(OCCLUDER_PULL_PX, points, centre);
     let mut flag = |j: usize| {
         let i = rim.order[j % m].1;
         if inliers[i] {
@@ -45,13 +53,19 @@ pub(crate) fn beside_hidden_rim(
         }
     };
     for (j, &gap) in rim.gaps.iter().enumerate() {
-        if gap > rim.wide {
-            flag(j);
-            flag(j + 1);
-        }
-        if rim.outlier(j) && rim.in_outlier_run(j) {
-            flag(j + m - 1);
-            flag(j + 1);
+        // Point j is the last before a hidden stretch, j + 1 the first
+        // after it; `m + j - k` stays a valid index round the rim.
+        let hidden_after = gap > rim.wide;
+        let hidden_here = rim.outlier(j) && rim.in_outlier_run(j);
+        for k in 0..reach {
+            if hidden_after {
+                flag(m + j - k);
+                flag(j + 1 + k);
+            }
+            if hidden_here {
+                flag(m + j - 1 - k);
+                flag(j + 1 + k);
+            }
         }
     }
     flagged
@@ -121,6 +135,8 @@ struct RimOrder<'a> {
     gaps: Vec<f64>,
     /// A gap wider than this is a hidden stretch.
     wide: f64,
+    /// The median gap, radians.
+    median_gap: f64,
     inliers: &'a [bool],
 }
 
@@ -143,13 +159,31 @@ impl<'a> RimOrder<'a> {
             .collect();
         let mut sorted = gaps.clone();
         sorted.sort_by(f64::total_cmp);
-        let wide = HIDDEN_GAP_FACTOR * sorted[m / 2];
+        let median_gap = sorted[m / 2];
         Some(Self {
             order,
             gaps,
-            wide,
+            wide: HIDDEN_GAP_FACTOR * median_gap,
+            median_gap,
             inliers,
         })
+    }
+
+    /// How many neighbours of a point lie within `distance_px` along the
+    /// rim (at least one): the median gap times the points' median
+    /// distance from `centre` is the rays' spacing.
+    fn neighbours_within(&self, distance_px: f64, points: &[[f64; 2]], centre: [f64; 2]) -> usize {
+        let mut radii: Vec<f64> = self
+            .order
+            .iter()
+            .map(|&(_, i)| (points[i][0] - centre[0]).hypot(points[i][1] - centre[1]))
+            .collect();
+        radii.sort_by(f64::total_cmp);
+        let spacing_px = self.median_gap * radii[radii.len() / 2];
+        if spacing_px.is_nan() || spacing_px <= 0.0 {
+            return 1;
+        }
+        ((distance_px / spacing_px).round() as usize).clamp(1, (self.order.len() / 4).max(1))
     }
 
     /// Whether the j-th point (round the rim, any j) is an outlier.
@@ -212,6 +246,17 @@ mod tests {
         let inliers = vec![true; pts.len()];
         let at = flagged_angles(&pts, &inliers);
         assert_eq!(at, vec![85, 130]);
+    }
+
+    /// On a denser rim the occluder's outline pulls as far along it: rays
+    /// one degree apart on a circle of radius 50 (0.87 px) lose the two
+    /// nearest on each side, as rays five degrees apart lose one.
+    #[test]
+    fn a_denser_rim_loses_the_points_as_far_from_a_gap() {
+        let mut pts = arc(0, 90, 1);
+        pts.extend(arc(130, 360, 1));
+        let inliers = vec![true; pts.len()];
+        assert_eq!(flagged_angles(&pts, &inliers), vec![88, 89, 130, 131]);
     }
 
     #[test]
