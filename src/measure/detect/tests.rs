@@ -894,11 +894,11 @@ fn a_probe_ending_inside_a_hazed_disc_leaves_the_disc_found() {
 
 /// `rim_point_spacing_px` sets the density of the measuring pass only: a ray
 /// on every pixel of the rim (1 px, the default) instead of every other one
-/// (2 px, as a tracked frame measures) finds the same disc, verified on the same 2 px rays (the
-/// detector's own ellipse is the very same), and the ellipse fitted to its
-/// points is closer: at least as much as the square root of the number of
-/// rays says for independent pixels' noise (0.71; 0.48 on these 16 noise
-/// draws, 0.025 -> 0.012 px rms).
+/// (2 px, as a tracked frame measures) finds the same disc, verified on the
+/// same 2 px rays (the detector's own ellipse is the very same), and the
+/// ellipse fitted to its points is closer: at least as much as the square
+/// root of the number of rays says for independent pixels' noise (0.71;
+/// 0.48 on these 16 noise draws, 0.025 -> 0.012 px rms).
 #[test]
 fn a_ray_on_every_rim_pixel_measures_the_centre_closer() {
     let (w, h) = (320, 240);
