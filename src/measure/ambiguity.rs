@@ -30,7 +30,7 @@
 //! edges found is beyond chance ([`MIN_EVIDENCE_Z`]); otherwise the rim
 //! says nothing and the answer stays `unresolved` (or goes to continuity).
 
-use super::detect::rim;
+use super::detect::{canopy, rim};
 use super::pose::CirclePose;
 use crate::camera::CameraModel;
 use image::GrayImage;
@@ -664,23 +664,11 @@ impl SmearedRim {
 
     /// Whether the rim is smeared in the direction of `p`.
     pub fn at(&self, p: [f64; 2]) -> bool {
-        if !self.limit_px.is_finite() || self.widths.is_empty() {
+        if !self.limit_px.is_finite() {
             return false;
         }
         let angle = (p[1] - self.centre[1]).atan2(p[0] - self.centre[0]);
-        let i = self.widths.partition_point(|a| a.0 < angle);
-        let n = self.widths.len();
-        let (before, after) = (self.widths[(i + n - 1) % n], self.widths[i % n]);
-        let gap = |a: f64| {
-            let d = (a - angle).abs() % std::f64::consts::TAU;
-            d.min(std::f64::consts::TAU - d)
-        };
-        let nearest = if gap(before.0) <= gap(after.0) {
-            before
-        } else {
-            after
-        };
-        nearest.1 > self.limit_px
+        canopy::nearest(&self.widths, angle).is_some_and(|&(_, width)| width > self.limit_px)
     }
 }
 

@@ -132,7 +132,7 @@ impl RimEdge<'_> {
 /// nearest in angle to `angle`: one of the two entries either side of it,
 /// the list read as a circle. A binary search, not a scan: this runs twice
 /// per canopy rim point, over lists of up to a few hundred rim points.
-pub(super) fn nearest<T>(by_angle: &[(f64, T)], angle: f64) -> Option<&(f64, T)> {
+pub(crate) fn nearest<T>(by_angle: &[(f64, T)], angle: f64) -> Option<&(f64, T)> {
     let n = by_angle.len();
     if n == 0 {
         return None;
