@@ -262,7 +262,8 @@ enum Reject {
     Soft(f64),
     /// The narrow passes did not settle.
     Unsettled,
-    /// The seed's first fit is the rim of a candidate already verified.
+    /// The seed's first fit or settled pass is the rim of a candidate
+    /// already verified, or that candidate's canopy rim.
     Known,
 }
 

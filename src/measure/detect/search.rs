@@ -50,6 +50,12 @@ const LOCAL_DARK_SIGMAS: f64 = 1.0;
 /// (`min_contrast_gray`): in flat sky a pixel must be this far below the
 /// mean besides, so that noise does not make regions.
 const LOCAL_FLOOR_CONTRAST: f64 = 0.25;
+/// Whether a verified candidate scores `accept`: that ends the search, and
+/// nothing less does.
+fn any_accepted(verified: &[Verified], accept: f64) -> bool {
+    verified.iter().any(|v| v.score >= accept)
+}
+
 /// Kinds of the local source's seeds: its regions' kinds 0-2 plus this.
 const LOCAL_KIND_OFFSET: u8 = 5;
 /// A region of a window is a disc of that window's sizes when its
@@ -320,7 +326,7 @@ impl Detector {
         // The edge source, when the dark regions gave no clear drogue: a
         // disc merged with the hose, probe or a glare streak, or washed out
         // by haze, still has its rim.
-        if !verified.iter().any(|v| v.score >= accept) {
+        if !any_accepted(&verified, accept) {
             let circles = self.voter.find(
                 &self.decimated,
                 self.cfg.min_contrast_gray,
@@ -336,10 +342,12 @@ impl Detector {
             };
             self.try_edge_circles(image, &circles, first, accept, &mut tried, &mut verified);
             // Circles nested with those (the disc around the probe's tip),
-            // when no candidate verified at all: their first pass starts
-            // inside their own rim, so that it does not take the smaller
-            // circle's rim again.
-            if verified.is_empty() {
+            // when still no candidate scored `accept`: their first pass
+            // starts inside their own rim, so that it does not take the
+            // smaller circle's rim again. A weaker candidate verified
+            // before (the probe's tip, a small dark spot judged without
+            // its canopy) does not stop them: the best score is the answer.
+            if !any_accepted(&verified, accept) {
                 let nested = self.voter.nested(&self.decimated, &circles, NESTED_SEEDS);
                 let around = EdgeSeeds {
                     reach: OWN_RIM_REACH,
@@ -350,12 +358,12 @@ impl Detector {
                 self.try_edge_circles(image, &nested, around, accept, &mut tried, &mut verified);
             }
             // The first circles again, their first pass starting past
-            // what lies inside them, when still none verified: the
+            // what lies inside them, when still none scored `accept`: the
             // probe's tip over the middle of a hazed disc is darker than
             // the disc, its outline the strongest step from any point
             // inside, and the tip is dropped as a circle inside a larger
             // dark shape ([`super::Reject::Nested`]).
-            if verified.is_empty() {
+            if !any_accepted(&verified, accept) {
                 let past_inside = EdgeSeeds {
                     reach: OWN_RIM_REACH,
                     from: OWN_RIM_FROM,
@@ -375,7 +383,7 @@ impl Detector {
         // The third source, when neither gave a clear drogue: dark regions
         // relative to their own neighbourhood (a disc that haze, vignetting
         // or a glare's halo lifted above every global threshold).
-        if self.cfg.local_contrast_source && !verified.iter().any(|v| v.score >= accept) {
+        if self.cfg.local_contrast_source && !any_accepted(&verified, accept) {
             self.try_local_contrast(image, accept, &mut tried, &mut verified);
         }
         tracing::debug!(

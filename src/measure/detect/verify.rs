@@ -219,7 +219,8 @@ impl Detector {
     /// Verifies a coarse seed: a wide ray pass from its centre, a robust
     /// fit, then the narrow pass around that fit. A seed whose fit is the
     /// rim of a candidate in `known` stops there ([`Reject::Known`]): the
-    /// narrow passes would settle on that candidate again.
+    /// narrow passes would settle on that candidate again; one whose narrow
+    /// passes settle there stops before its evidence is taken.
     #[inline(never)]
     pub(super) fn verify_seed(
         &mut self,
@@ -280,18 +281,38 @@ impl Detector {
         if !self.plausible(&first, 0.5) {
             return Err(Reject::Implausible);
         }
-        if known.iter().any(|v| same_rim(&v.ellipse, &first)) {
+        if self.known_rim(known, &first) {
             return Err(Reject::Known);
         }
         // Candidates are compared on a sparser rim (cheaper); the winner
         // gets the full density.
-        self.verify_settled(
+        let pass = self.settled_pass(
             image,
             &first,
             SCOUT_SPACING_PX.max(self.cfg.rim_point_spacing_px),
             self.cfg.max_rim_points,
             RimUse::Scout,
-        )
+        )?;
+        // A seed that settles on a candidate's rim is that candidate: its
+        // evidence (the canopy test above all) is not taken again.
+        if self.known_rim(known, &pass.ellipse) {
+            return Err(Reject::Known);
+        }
+        self.score(image, pass)
+    }
+
+    /// Whether `e` is the rim of a candidate in `known`, or that
+    /// candidate's canopy rim (concentric, `R / r` times its size): the
+    /// canopy around a verified disc is no disc of its own, and its rim
+    /// passes and canopy test, the largest of any seed's, would only end
+    /// in [`Reject::NoCanopy`].
+    fn known_rim(&self, known: &[Verified], e: &Ellipse) -> bool {
+        let ratio = self.drogue.canopy_radius_m / self.drogue.inner_radius_m;
+        known.iter().any(|v| {
+            let k = &v.ellipse;
+            let canopy = Ellipse::new(k.cx, k.cy, ratio * k.a, ratio * k.b, k.theta);
+            same_rim(k, e) || same_rim(&canopy, e)
+        })
     }
 
     /// Size and shape plausible for the disc (`slack` widens the limits).
@@ -337,9 +358,7 @@ impl Detector {
     }
 
     /// Narrow ray pass around an ellipse (undistorted pixels), robust refit,
-    /// and the evidence score: [`Self::rim_pass`], repeated from its own result while that moves
-    /// by more than half a pixel (the narrow search is centred on the start
-    /// ellipse: a start a few pixels off gives edges near the window's ends).
+    /// and the evidence score: [`Self::settled_pass`], then [`Self::score`].
     pub(super) fn verify_settled(
         &mut self,
         image: &GrayImage,
@@ -348,14 +367,28 @@ impl Detector {
         max_points: u32,
         rim_use: RimUse,
     ) -> Result<Verified, Reject> {
-        // The canopy evidence (a second ray pass) is looked at only on the
-        // pass that is kept: a pass that moves the ellipse is followed by
-        // another one.
+        let pass = self.settled_pass(image, start, spacing_px, max_points, rim_use)?;
+        self.score(image, pass)
+    }
+
+    /// [`Self::rim_pass`], repeated from its own result while that moves by
+    /// more than half a pixel (the narrow search is centred on the start
+    /// ellipse: a start a few pixels off gives edges near the window's
+    /// ends), at most three times. The evidence (the canopy's rim, a second
+    /// ray pass) is looked at only on the pass that is kept.
+    fn settled_pass(
+        &mut self,
+        image: &GrayImage,
+        start: &Ellipse,
+        spacing_px: f64,
+        max_points: u32,
+        rim_use: RimUse,
+    ) -> Result<RimPass, Reject> {
         let mut previous = *start;
         for round in 0..3 {
             let pass = self.rim_pass(image, &previous, spacing_px, max_points, rim_use)?;
             if round == 2 || pass.ellipse.max_param_error_px(&previous) <= 0.5 {
-                return self.score(image, pass);
+                return Ok(pass);
             }
             previous = pass.ellipse;
         }
