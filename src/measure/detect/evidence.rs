@@ -303,9 +303,8 @@ impl Detector {
             tolerance_px = tol,
             "evidence"
         );
-        let canopy = canopy.unwrap_or(0.0);
         let w = self.cfg.canopy_weight.clamp(0.0, 1.0);
-        let score = (shape * ((1.0 - w) + w * canopy)).clamp(0.0, 1.0);
+        let score = (shape * ((1.0 - w) + w * canopy.unwrap_or(0.0))).clamp(0.0, 1.0);
         if score < self.cfg.min_score {
             return Err(Reject::LowScore(score));
         }
@@ -324,6 +323,7 @@ impl Detector {
             score,
             rim_contrast,
             step_widths_px: measured.step_widths_px,
+            canopy,
         })
     }
 }

@@ -216,6 +216,9 @@ struct Verified {
     rim_contrast: f64,
     /// Step width of each of `points_px`, pixels.
     step_widths_px: Vec<f64>,
+    /// The canopy evidence: the share of its predicted rim that shows it
+    /// (`None`: not judged, the rim off the frame or too small).
+    canopy: Option<f64>,
 }
 
 /// Why a candidate was not kept: shown by `RUST_LOG=debug` (the

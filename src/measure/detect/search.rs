@@ -5,6 +5,7 @@
 use super::coarse::{self, Blob};
 use super::edges::EdgeCircle;
 use super::{Detector, Reject, Verified};
+use crate::measure::ellipse::Ellipse;
 use image::GrayImage;
 
 /// Wide-pass reach of seeds whose radius is not a rim's (the deepest
@@ -538,9 +539,12 @@ impl Detector {
     /// The canopy's outer rim taken for the disc (under haze its step to
     /// the sky can be the strongest on every ray) has the disc inside it,
     /// concentric, at `r / R` of its size. When that inner ellipse verifies
-    /// as a rim of its own, with a step of comparable contrast, it is the
-    /// disc. Inside a true disc there is no such rim: the shading of its
-    /// inside gives steps far weaker than its rim's.
+    /// as a rim of its own (narrow passes where it must be, else a wide
+    /// pass from the centre), with a step of comparable contrast and its
+    /// canopy shown better than the outer rim's, it is the disc. Inside a
+    /// true disc there is no such rim: the shading of its inside gives
+    /// steps far weaker than its rim's, and the probe's end seen there
+    /// predicts a canopy on the disc's own.
     pub(super) fn prefer_inner_disc(
         &mut self,
         image: &GrayImage,
@@ -564,7 +568,25 @@ impl Detector {
             from: 0.0,
             kind: 4,
         };
-        let inner = match self.verify_seed(image, &seed, index ^ INNER_SEED_STREAM, &[]) {
+        // First the narrow passes where the disc must be, concentric at
+        // `r / R` of the outer rim: their window (a tenth of the radius)
+        // holds the disc's own step, where the wide pass's strongest rise
+        // can be the outline of the probe over the disc (nearer, so darker
+        // under haze than the disc is).
+        let predicted = Ellipse::new(e.cx, e.cy, e.a * ratio, e.b * ratio, e.theta);
+        let narrow = self.verify_settled(
+            image,
+            &predicted,
+            super::verify::SCOUT_SPACING_PX.max(self.cfg.rim_point_spacing_px),
+            self.cfg.max_rim_points,
+            super::verify::RimUse::Scout,
+        );
+        if let Err(why) = &narrow {
+            tracing::debug!(?why, "no inner disc where predicted: the wide pass");
+        }
+        let inner = match narrow
+            .or_else(|_| self.verify_seed(image, &seed, index ^ INNER_SEED_STREAM, &[]))
+        {
             Ok(inner) => inner,
             Err(why) => {
                 tracing::debug!(outer_axes_px = ?[e.a.round(), e.b.round()], ?why, "no inner disc");
@@ -584,6 +606,18 @@ impl Detector {
             outer_contrast = outer.rim_contrast,
             "inner disc"
         );
-        if nested && strong { inner } else { outer }
+        // The two nested rims each predict where the canopy's rim is: the
+        // inner one is kept only when the frame shows its canopy better
+        // (the probe's tip inside a hazed disc is nested and strong too,
+        // but its predicted canopy falls on the disc's own canopy).
+        let better_canopy = match (inner.canopy, outer.canopy) {
+            (Some(i), Some(o)) => i > o,
+            _ => true,
+        };
+        if nested && strong && better_canopy {
+            inner
+        } else {
+            outer
+        }
     }
 }

@@ -473,6 +473,31 @@ fn a_blurred_disc_in_heavy_noise_keeps_its_size() {
     assert!(found >= 2, "found in {found} of 4 noise draws");
 }
 
+/// `start` verified by the narrow passes (the scouts' spacing), then the
+/// disc looked for inside it: the ellipse the search keeps.
+fn kept_after_inner_search(
+    detector: &mut Detector,
+    img: &GrayImage,
+    start: &Ellipse,
+    cfg: &Config,
+) -> Ellipse {
+    let verified = detector
+        .verify_settled(
+            img,
+            start,
+            cfg.detect.rim_point_spacing_px,
+            cfg.detect.max_rim_points,
+            super::verify::RimUse::Scout,
+        )
+        .unwrap_or_else(|why| panic!("{start:?} does not verify: {why:?}"));
+    detector.prefer_inner_disc(img, verified, 0).ellipse
+}
+
+/// `e` scaled about its centre by `k` (the canopy's rim: `R / r`).
+fn scaled(e: &Ellipse, k: f64) -> Ellipse {
+    Ellipse::new(e.cx, e.cy, k * e.a, k * e.b, e.theta)
+}
+
 #[test]
 fn the_canopy_taken_for_the_disc_gives_way_to_the_disc_inside() {
     // Haze: a dull disc in a dull canopy against a bright sky, where the
@@ -496,13 +521,7 @@ fn the_canopy_taken_for_the_disc_gives_way_to_the_disc_inside() {
     let spacing = cfg.detect.rim_point_spacing_px;
     let max_points = cfg.detect.max_rim_points;
     // The scene's canopy rim (the band's outer edge) is at 2.2 disc radii.
-    let canopy = Ellipse::new(
-        truth.cx,
-        truth.cy,
-        2.2 * truth.a,
-        2.2 * truth.b,
-        truth.theta,
-    );
+    let canopy = scaled(&truth, 2.2);
     let outer = detector
         .verify_settled(
             &img,
@@ -522,17 +541,69 @@ fn the_canopy_taken_for_the_disc_gives_way_to_the_disc_inside() {
         (chosen.a - truth.a).abs() < 1.0 && (chosen.b - truth.b).abs() < 1.0,
         "{chosen:?} for {truth:?}"
     );
-    let disc = detector
-        .verify_settled(
-            &img,
-            &truth,
-            spacing,
-            max_points,
-            super::verify::RimUse::Scout,
-        )
-        .expect("the disc verifies");
-    let kept = detector.prefer_inner_disc(&img, disc, 0).ellipse;
+    let kept = kept_after_inner_search(&mut detector, &img, &truth, &cfg);
     assert!((kept.a - truth.a).abs() < 1.0, "{kept:?}");
+}
+
+/// The canopy taken for the disc in haze, with the probe (nearer, so far
+/// darker than the disc) over the disc's lower half, ending at its centre
+/// (as the reference frame `hard_b/frame_0009` transposed): from the
+/// centre the probe's outline is the strongest rise on a third of the
+/// rays, and the wide pass fitted an ellipse to it and the disc's rim
+/// together. The narrow passes where the disc must be (concentric, at
+/// `r / R` of the canopy) find the disc, whose canopy (the rim taken for
+/// the disc) the frame shows better than that rim's own predicted canopy.
+#[test]
+fn the_canopy_taken_for_the_disc_gives_way_to_the_disc_under_the_probe() {
+    let (w, h) = (400, 300);
+    let mut cfg = Config::embedded();
+    cfg.detect.min_canopy_fraction = 0.0;
+    let cam = camera(w, h);
+    let truth = Ellipse::new(197.6, 152.3, 30.0, 28.0, -0.4);
+    let mut scene = Scene::new(truth);
+    scene.disc_level = 100.0;
+    scene.canopy_level = 130.0;
+    scene.band_level = 115.0;
+    scene.sky_level = 160.0;
+    let tip = [truth.cx + 2.0, truth.cy];
+    scene.tip = Some((tip, 12.0, 30.0));
+    scene.bar = Some((tip, 12.0, 30.0));
+    for seed in [23, 24, 25, 26] {
+        let img = scene.render(w, h, 2.0, seed);
+        let mut detector = crate::testing::detector(&cfg, &cam);
+        let chosen = kept_after_inner_search(&mut detector, &img, &scaled(&truth, 2.2), &cfg);
+        assert!(
+            (chosen.a - truth.a).abs() < 1.5 && (chosen.b - truth.b).abs() < 1.5,
+            "noise seed {seed}: {chosen:?} for {truth:?}"
+        );
+    }
+}
+
+/// The probe seen end-on, its rounded end a dark circle inside a hazed
+/// disc at about `r / R` of its size: a strong rim nested in the disc's,
+/// which verifies on its own (its predicted canopy is the disc's rim, a
+/// brightening with the lighter disc before it). The frame shows the
+/// disc's canopy better than the tip's: the disc keeps its place (taking
+/// the nested rim whenever it verified gave the tip on every draw here).
+#[test]
+fn the_probes_tip_inside_a_hazed_disc_does_not_take_its_place() {
+    let (truth, mut scene) = probe_tip_in_hazed_disc();
+    scene.bar = None;
+    scene.tip = Some(([truth.cx + 1.0, truth.cy + 1.0], 20.0, 20.0));
+    let cam = camera(400, 300);
+    let cfg = Config::embedded();
+    for disc_level in [95.0, 125.0] {
+        scene.disc_level = disc_level;
+        for seed in 2..6 {
+            let img = scene.render(400, 300, 7.0, seed);
+            let mut detector = crate::testing::detector(&cfg, &cam);
+            let kept = kept_after_inner_search(&mut detector, &img, &truth, &cfg);
+            assert!(
+                (kept.a - truth.a).abs() < 1.5,
+                "disc level {disc_level}, noise seed {seed}: {kept:?}"
+            );
+        }
+    }
 }
 
 /// A step whose light side reaches saturation is a glare streak's skirt

@@ -15,7 +15,7 @@ use std::f64::consts::TAU;
 /// configured spacing, if sparser). Fixed, not a multiple of
 /// `rim_point_spacing_px`: the measuring pass's density changes what is
 /// measured, not which candidates are found.
-const SCOUT_SPACING_PX: f64 = 6.0;
+pub(super) const SCOUT_SPACING_PX: f64 = 6.0;
 
 /// Rim ray spacing of the pass that verifies the chosen candidate again at
 /// full density, pixels (or the configured spacing, if sparser). Fixed for
