@@ -87,6 +87,11 @@ const fn limit(
 /// median of 7 frames; over 30 frames of the seeds 12, 3 and 7 it went
 /// 0.021 -> 0.015, 0.016 -> 0.028 and 0.044 -> 0.025 %), and exposure
 /// 0.7's false count 0 -> 1 (an unresolved answer's mirror half first).
+/// The edge source's votes without the edges that rise into a glare
+/// (nineteenth session) found the 30 px streak's three missed discs (70 ->
+/// 100 %), one of them an unresolved answer whose mirror half comes first
+/// (false 0 -> 1); over 30 frames of the seeds 1-16 that level went 443 ->
+/// 457 of 480 with no wrong ellipse left.
 #[rustfmt::skip]
 const LIMITS: &[Limit] = &[
     //    level                                  detected %  false  wrong  centre px     position %    normal deg
@@ -96,7 +101,7 @@ const LIMITS: &[Limit] = &[
     limit("haze 0.6", Some(100), 0, 0, Some(0.015), Some(0.024), Some(0.32)),
     limit("glare streak 4 px wide", Some(100), 1, 0, Some(0.02), Some(0.035), Some(0.16)),
     limit("glare streak 12 px wide", Some(100), 1, 0, Some(0.022), Some(0.044), Some(0.2)),
-    limit("glare streak 30 px wide", Some(70), 0, 0, Some(0.029), Some(0.047), Some(1.36)),
+    limit("glare streak 30 px wide", Some(100), 1, 0, Some(0.029), Some(0.047), Some(1.36)),
     limit("motion blur 4 px", Some(100), 0, 0, Some(0.02), Some(0.059), Some(0.67)),
     limit("motion blur 8 px", Some(100), 0, 0, Some(0.027), Some(0.095), Some(0.98)),
     limit("motion blur 16 px", Some(100), 3, 0, Some(0.043), Some(0.443), Some(1.2)),

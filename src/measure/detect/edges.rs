@@ -42,6 +42,17 @@ const NESTED_REACH: f64 = 2.0 * PEAK_SEPARATION as f64;
 /// than a circle's worth of votes more often than not, and each costs a
 /// pass over the edges.
 const NESTED_CELLS_PER_CIRCLE: usize = 4;
+/// Decimated level from which a pixel is saturated (a glare). An edge
+/// whose light side keeps rising into saturation is the glare's own (its
+/// skirt, however wide): a glare streak's two long edges are the strongest
+/// of the frame, and their votes along lines bury a disc's that the streak
+/// cuts in two. Like the rim passes' steps into saturation, they say
+/// nothing of the disc. The rise is followed at most this many decimated
+/// pixels.
+const SATURATED_LEVEL: u8 = 250;
+const MAX_SKIRT_PX: usize = 16;
+const SKIRT_DIP: u8 = 4;
+
 /// A peak needs votes from at least this share of its rim's circumference
 /// (decimated pixels).
 const MIN_RIM_SHARE: f64 = 0.35;
@@ -276,6 +287,7 @@ impl EdgeVoter {
         let (w, h) = (img.width, img.height);
         let min2 = (min_gradient * 8.0).powi(2);
         self.edges.clear();
+        let any_glare = img.pixels.iter().any(|&p| p >= SATURATED_LEVEL);
         for y in 1..h - 1 {
             // The three rows, each cut to the window's columns: no bounds
             // test per pixel.
@@ -294,6 +306,10 @@ impl EdgeVoter {
                 let m2 = f64::from(gx * gx + gy * gy);
                 if m2 >= min2 {
                     let m = m2.sqrt();
+                    let dir = [f64::from(gx) / m, f64::from(gy) / m];
+                    if any_glare && Self::rises_into_glare(img, x, y, dir) {
+                        continue;
+                    }
                     self.edges.push((
                         [x as i32, y as i32],
                         [(f64::from(gx) / m) as f32, (f64::from(gy) / m) as f32],
@@ -301,6 +317,29 @@ impl EdgeVoter {
                 }
             }
         }
+    }
+
+    /// Whether the level keeps rising from (x, y) along `dir` (toward the
+    /// light side, unit length) until it saturates: a glare's skirt. A dip
+    /// of up to [`SKIRT_DIP`] levels is the decimated frame's noise.
+    fn rises_into_glare(img: &Decimated, x: usize, y: usize, dir: [f64; 2]) -> bool {
+        let mut peak = img.pixels[y * img.width + x];
+        for k in 1..=MAX_SKIRT_PX {
+            let u = (x as f64 + k as f64 * dir[0] + 0.5).floor();
+            let v = (y as f64 + k as f64 * dir[1] + 0.5).floor();
+            if !(u >= 0.0 && v >= 0.0 && u < img.width as f64 && v < img.height as f64) {
+                return false;
+            }
+            let p = img.pixels[v as usize * img.width + u as usize];
+            if p >= SATURATED_LEVEL {
+                return true;
+            }
+            if p.saturating_add(SKIRT_DIP) < peak {
+                return false;
+            }
+            peak = peak.max(p);
+        }
+        false
     }
 
     /// Each edge votes for the centres r_min..=r_max pixels against its
@@ -563,6 +602,58 @@ mod tests {
         assert!(!found.iter().any(|c| near(c, 60.0)), "{found:?}");
         let nested = voter.nested(&img, &found, 2);
         assert!(near(&nested[0], 60.0), "{nested:?}");
+    }
+
+    /// A dark disc (radius 40 px at (400, 300)) and a saturated glare
+    /// streak 24 px wide with a soft skirt, at 30 degrees across the
+    /// frame, `offset_px` from the disc's centre; decimated by 4.
+    fn disc_beside_a_streak(offset_px: f64) -> Decimated {
+        let img = GrayImage::from_fn(800, 600, |x, y| {
+            let (u, v) = (f64::from(x), f64::from(y));
+            let across = ((v - 300.0) * 0.866 - (u - 400.0) * 0.5 - offset_px).abs();
+            let glare = if across < 12.0 {
+                255.0
+            } else {
+                (255.0 - 12.0 * (across - 12.0)).max(0.0)
+            };
+            let disc = (u - 400.0).hypot(v - 300.0) < 40.0;
+            let base: f64 = if disc { 40.0 } else { 170.0 };
+            image::Luma([base.max(glare) as u8])
+        });
+        let mut d = Decimated::default();
+        d.update(&img, 4);
+        d
+    }
+
+    /// The streak's long edges, beside its saturated middle, cast no votes
+    /// (far from any disc, no edge of the frame is left); the disc's rim
+    /// beside the streak still votes, and the disc is found.
+    #[test]
+    fn a_glare_streaks_edges_do_not_vote_and_a_disc_beside_it_does() {
+        let mut voter = EdgeVoter::default();
+        voter.collect_edges(&disc_beside_a_streak(200.0), 6.0);
+        let near_disc = |e: &&([i32; 2], [f32; 2])| {
+            (f64::from(e.0[0]) - 100.0).hypot(f64::from(e.0[1]) - 75.0) < 14.0
+        };
+        // (Where the streak leaves the frame its rise is cut off: those
+        // edges, within 2 pixels of the border, may stay.)
+        let inside =
+            |e: &&([i32; 2], [f32; 2])| (3..197).contains(&e.0[0]) && (3..147).contains(&e.0[1]);
+        let far: Vec<_> = voter
+            .edges
+            .iter()
+            .filter(|e| inside(e) && !near_disc(e))
+            .collect();
+        assert!(far.is_empty(), "{} edges, {far:?}", voter.edges.len());
+        assert!(!voter.edges.is_empty());
+        for offset_px in [200.0, 60.0, 30.0] {
+            let found = voter.find(&disc_beside_a_streak(offset_px), 12.0, 10.0, 200.0, 2);
+            let on_disc = |c: &EdgeCircle| {
+                (c.centre_px[0] - 400.0).hypot(c.centre_px[1] - 300.0) < 6.0
+                    && (c.radius_px - 40.0).abs() < 8.0
+            };
+            assert!(found.iter().any(on_disc), "{offset_px}: {found:?}");
+        }
     }
 
     #[test]
