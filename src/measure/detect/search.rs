@@ -574,13 +574,7 @@ impl Detector {
         // can be the outline of the probe over the disc (nearer, so darker
         // under haze than the disc is).
         let predicted = Ellipse::new(e.cx, e.cy, e.a * ratio, e.b * ratio, e.theta);
-        let narrow = self.verify_settled(
-            image,
-            &predicted,
-            super::verify::SCOUT_SPACING_PX.max(self.cfg.rim_point_spacing_px),
-            self.cfg.max_rim_points,
-            super::verify::RimUse::Scout,
-        );
+        let narrow = self.verify_as_scout(image, &predicted);
         if let Err(why) = &narrow {
             tracing::debug!(?why, "no inner disc where predicted: the wide pass");
         }

@@ -15,7 +15,7 @@ use std::f64::consts::TAU;
 /// configured spacing, if sparser). Fixed, not a multiple of
 /// `rim_point_spacing_px`: the measuring pass's density changes what is
 /// measured, not which candidates are found.
-pub(super) const SCOUT_SPACING_PX: f64 = 6.0;
+const SCOUT_SPACING_PX: f64 = 6.0;
 
 /// Rim ray spacing of the pass that verifies the chosen candidate again at
 /// full density, pixels (or the configured spacing, if sparser). Fixed for
@@ -369,6 +369,22 @@ impl Detector {
     ) -> Result<Verified, Reject> {
         let pass = self.settled_pass(image, start, spacing_px, max_points, rim_use)?;
         self.score(image, pass)
+    }
+
+    /// [`Self::verify_settled`] from `start` as a seed's candidate is
+    /// verified: on the scouts' sparser rim, to be compared with the others.
+    pub(super) fn verify_as_scout(
+        &mut self,
+        image: &GrayImage,
+        start: &Ellipse,
+    ) -> Result<Verified, Reject> {
+        self.verify_settled(
+            image,
+            start,
+            SCOUT_SPACING_PX.max(self.cfg.rim_point_spacing_px),
+            self.cfg.max_rim_points,
+            RimUse::Scout,
+        )
     }
 
     /// [`Self::rim_pass`], repeated from its own result while that moves by
