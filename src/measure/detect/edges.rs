@@ -310,10 +310,8 @@ impl EdgeVoter {
                     if any_glare && Self::rises_into_glare(img, x, y, dir) {
                         continue;
                     }
-                    self.edges.push((
-                        [x as i32, y as i32],
-                        [(f64::from(gx) / m) as f32, (f64::from(gy) / m) as f32],
-                    ));
+                    self.edges
+                        .push(([x as i32, y as i32], [dir[0] as f32, dir[1] as f32]));
                 }
             }
         }

@@ -289,7 +289,7 @@ impl Detector {
         let pass = self.settled_pass(
             image,
             &first,
-            SCOUT_SPACING_PX.max(self.cfg.rim_point_spacing_px),
+            self.scout_spacing_px(),
             self.cfg.max_rim_points,
             RimUse::Scout,
         )?;
@@ -371,6 +371,11 @@ impl Detector {
         self.score(image, pass)
     }
 
+    /// Rim ray spacing on which candidates are compared, pixels.
+    fn scout_spacing_px(&self) -> f64 {
+        SCOUT_SPACING_PX.max(self.cfg.rim_point_spacing_px)
+    }
+
     /// [`Self::verify_settled`] from `start` as a seed's candidate is
     /// verified: on the scouts' sparser rim, to be compared with the others.
     pub(super) fn verify_as_scout(
@@ -381,7 +386,7 @@ impl Detector {
         self.verify_settled(
             image,
             start,
-            SCOUT_SPACING_PX.max(self.cfg.rim_point_spacing_px),
+            self.scout_spacing_px(),
             self.cfg.max_rim_points,
             RimUse::Scout,
         )
