@@ -257,16 +257,18 @@ pub fn smooth(p: &mut [f32], half: usize, scratch: &mut Vec<f32>) {
         return;
     }
     let width = (2 * half + 1) as f32;
+    let window = 2 * half + 1;
     for _ in 0..2 {
+        // The profile with its ends held `half` samples before and
+        // `half + 1` after: the window slides with no clamp per sample.
         scratch.clear();
+        scratch.resize(half, p[0]);
         scratch.extend_from_slice(p);
-        let at = |k: isize| scratch[k.clamp(0, n as isize - 1) as usize];
-        let h = half as isize;
-        let mut sum: f32 = (-h..=h).map(at).sum();
-        for (k, out) in p.iter_mut().enumerate() {
+        scratch.resize(n + 2 * half + 1, p[n - 1]);
+        let mut sum: f32 = scratch[..window].iter().sum();
+        for ((out, &enter), &leave) in p.iter_mut().zip(&scratch[window..]).zip(&scratch[..]) {
             *out = sum / width;
-            let k = k as isize;
-            sum += at(k + h + 1) - at(k - h);
+            sum += enter - leave;
         }
     }
 }
