@@ -238,6 +238,40 @@ fn regions_without_a_rim_leave_the_budget_to_the_disc() {
     );
 }
 
+/// A glare streak across the disc whose core over it stays below
+/// saturation is a light bar cutting the disc in two. Its edges are steps
+/// from the disc's dark up to a light far above the canopy's, and past the
+/// bar the level falls back to the disc's: no rim (`verify::light_bars`).
+/// Taken for rim, they made one side of the disc verify as a smaller
+/// ellipse (the bar's edge its chord), or a distractor beside the bar win:
+/// in these five `everything` frames (seeds 1, 6, 10 and 15) the answer's
+/// axes were 0.34-0.87 of the disc's, its centre 8-56 px off: a wrong pose.
+/// Each is now the disc, right by the sweep's own measure.
+#[test]
+fn a_light_bar_across_the_disc_gives_no_rim() {
+    let levels = standard_levels();
+    let everything = levels.iter().find(|l| l.label() == "everything").unwrap();
+    let mut wrong = Vec::new();
+    for (seed, index) in [(1, 29), (6, 13), (10, 9), (15, 8), (15, 13)] {
+        let (m, truth) = sweep::measure_one(seed, everything, index);
+        let truth = truth.expect("a drogue frame").ellipse;
+        let Some(found) = m.detection.map(|d| d.ellipse_px) else {
+            wrong.push(format!("seed {seed} frame {index}: not detected"));
+            continue;
+        };
+        let centre = (found.cx - truth.cx).hypot(found.cy - truth.cy);
+        if centre > sweep::WRONG_CENTRE_SHARE * truth.b
+            || (found.a / truth.a - 1.0).abs() > sweep::WRONG_ELLIPSE_SHARE
+            || (found.b / truth.b - 1.0).abs() > sweep::WRONG_ELLIPSE_SHARE
+        {
+            wrong.push(format!(
+                "seed {seed} frame {index}: {found:?} for {truth:?}"
+            ));
+        }
+    }
+    assert!(wrong.is_empty(), "{wrong:#?}");
+}
+
 /// The scoring itself: truth and measurement meet in the same (undistorted)
 /// pixels, also through a strongly distorting lens; a drogue-free level
 /// expects nothing; and the limits catch a level that gets worse.

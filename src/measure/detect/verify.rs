@@ -45,6 +45,15 @@ const SAME_RIM: f64 = 0.05;
 
 /// Samples per seed radius on the rays of a seed's wide first pass.
 const WIDE_STEPS_PER_RADIUS: f64 = 40.0;
+/// A light bar over the disc ends within this share of the gap between
+/// the disc's rim and the canopy's outer rim ([`Detector::mark_light_bars`]):
+/// the canopy's darker rim band lies beyond.
+const BAR_REACH_CANOPY_GAPS: f64 = 0.8;
+/// A bar's light side exceeds the rim's usual light side by the rim's
+/// contrast, and at the least by this many noise sigmas and gray levels
+/// (the fill test's margin for a glare's veil).
+const BAR_MIN_NOISE_SIGMAS: f64 = 3.0;
+const BAR_MIN_GRAY: f64 = 2.0;
 
 /// One narrow rim pass around an ellipse, before its canopy evidence.
 pub(super) struct RimPass {
@@ -460,6 +469,65 @@ impl Detector {
         (m, rim::light_side_slope(faint, s0, 0.5, &m))
     }
 
+    /// The steps that rise onto a light bar lying
+    /// over the dark shape, a glare streak below saturation: their light
+    /// side is lighter than the rim's others by more than the rim's
+    /// contrast, and beyond it, short of where the canopy's outer rim could
+    /// lie, the level falls back below the step's mid level (the dark shape
+    /// again, past the bar). A canopy lit by a glare is lighter too, but
+    /// stays light that far. `points_px` lie on rays from `centre`;
+    /// `min_radius_px` is the smallest radius of the ellipse searched
+    /// (a bar lies anywhere across the disc, a step onto it near the centre).
+    fn light_bars(
+        &mut self,
+        image: &GrayImage,
+        centre: [f64; 2],
+        points_px: &[[f64; 2]],
+        contrasts: &[f64],
+        mid_levels: &[f32],
+        min_radius_px: f64,
+    ) -> Vec<bool> {
+        let mut bars = vec![false; contrasts.len()];
+        let lights: Vec<f64> = contrasts
+            .iter()
+            .zip(mid_levels)
+            .map(|(&c, &m)| f64::from(m) + 0.5 * c)
+            .collect();
+        let margin_floor = BAR_MIN_NOISE_SIGMAS * self.noise_gray + BAR_MIN_GRAY;
+        // No step can stand out by the margin when all lie within it (the
+        // usual rim: no medians taken).
+        let (low, high) = lights
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &v| {
+                (l.min(v), h.max(v))
+            });
+        if high - low <= margin_floor {
+            return bars;
+        }
+        let contrast = median(&mut contrasts.to_vec());
+        let light = median(&mut lights.clone());
+        let margin = contrast.max(margin_floor);
+        let canopy_gap = (self.drogue.canopy_radius_m / self.drogue.inner_radius_m - 1.0).max(0.0);
+        for (i, bar) in bars.iter_mut().enumerate() {
+            if lights[i] <= light + margin {
+                continue;
+            }
+            let p = points_px[i];
+            let (dx, dy) = (p[0] - centre[0], p[1] - centre[1]);
+            let s = dx.hypot(dy);
+            if s < 1.0 {
+                continue;
+            }
+            let dir = [dx / s, dy / s];
+            let reach = BAR_REACH_CANOPY_GAPS * canopy_gap * s.max(min_radius_px);
+            rim::profile(image, centre, dir, s, s + reach, 1.0, &mut self.profile);
+            // Two samples running below the mid level: not one noisy one.
+            let mid = mid_levels[i];
+            *bar = self.profile.windows(2).any(|w| w.iter().all(|&v| v < mid));
+        }
+        bars
+    }
+
     /// The narrow ray pass around `start` and the robust refit, with the
     /// checks of the rim itself (size, shape, contrast, one dark inside).
     pub(super) fn rim_pass(
@@ -636,12 +704,21 @@ impl Detector {
         // no rim points and do not count against the candidate, unless
         // they are most of the rim (an overexposed canopy).
         let glared = glares.iter().filter(|&&g| g).count();
+        let glares_dropped = glared > 0 && 2 * glared < glares.len();
+        // Steps onto a light bar over the disc give no rim points either,
+        // but count against it as an occluder's would: the disc's rim is
+        // hidden there, and a sliver of the disc beside the bar must not
+        // score as a whole disc.
+        let bars = self.light_bars(image, centre, &points_px, &contrasts, &mid_levels, start.b);
+        // A step into saturation is the glare's, whatever its light.
+        let bars: Vec<bool> = bars.iter().zip(&glares).map(|(&b, &g)| b && !g).collect();
+        let barred = bars.iter().filter(|&&b| b).count();
         // Their mid levels still say where the disc's inside is dark: the
         // glare's skirt lifts the disc's levels beside the streak. Each is
         // kept with its point (undistorted pixels) and turned into an angle
         // about the fitted ellipse for the fill test.
         let mut glare_steps: Vec<([f64; 2], FillLevels)> = Vec::new();
-        if glared > 0 && 2 * glared < glares.len() {
+        if glares_dropped {
             glare_steps = (0..glares.len())
                 .filter(|&i| glares[i])
                 .map(|i| {
@@ -651,16 +728,21 @@ impl Detector {
                     )
                 })
                 .collect();
-            drop_marked(&mut points_px, &glares);
-            drop_marked(&mut undistorted, &glares);
-            drop_marked(&mut contrasts, &glares);
-            drop_marked(&mut mid_levels, &glares);
-            drop_marked(&mut widths, &glares);
-            if rim_use == RimUse::Measure {
-                drop_marked(&mut measured_base, &glares);
-                drop_marked(&mut shading, &glares);
-            }
             rays_in_image -= glared;
+        }
+        let dropped: Vec<bool> = (0..glares.len())
+            .map(|i| (glares_dropped && glares[i]) || (2 * barred < bars.len() && bars[i]))
+            .collect();
+        if dropped.iter().any(|&d| d) {
+            drop_marked(&mut points_px, &dropped);
+            drop_marked(&mut undistorted, &dropped);
+            drop_marked(&mut contrasts, &dropped);
+            drop_marked(&mut mid_levels, &dropped);
+            drop_marked(&mut widths, &dropped);
+            if rim_use == RimUse::Measure {
+                drop_marked(&mut measured_base, &dropped);
+                drop_marked(&mut shading, &dropped);
+            }
         }
         if rays_in_image < rays / 4 {
             return Err(Reject::OutOfImage);
