@@ -256,8 +256,8 @@ pub fn smooth(p: &mut [f32], half: usize, scratch: &mut Vec<f32>) {
     if half == 0 || n < 2 {
         return;
     }
-    let width = (2 * half + 1) as f32;
     let window = 2 * half + 1;
+    let width = window as f32;
     for _ in 0..2 {
         // The profile with its ends held `half` samples before and
         // `half + 1` after: the window slides with no clamp per sample.

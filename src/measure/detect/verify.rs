@@ -46,8 +46,8 @@ const SAME_RIM: f64 = 0.05;
 /// Samples per seed radius on the rays of a seed's wide first pass.
 const WIDE_STEPS_PER_RADIUS: f64 = 40.0;
 /// A light bar over the disc ends within this share of the gap between
-/// the disc's rim and the canopy's outer rim ([`Detector::mark_light_bars`]):
-/// the canopy's darker rim band lies beyond.
+/// the disc's rim and the canopy's outer rim ([`Detector::light_bars`]): the
+/// canopy's darker rim band lies beyond.
 const BAR_REACH_CANOPY_GAPS: f64 = 0.8;
 /// A bar's light side exceeds the rim's usual light side by the rim's
 /// contrast, and at the least by this many noise sigmas and gray levels
@@ -469,15 +469,15 @@ impl Detector {
         (m, rim::light_side_slope(faint, s0, 0.5, &m))
     }
 
-    /// The steps that rise onto a light bar lying
-    /// over the dark shape, a glare streak below saturation: their light
-    /// side is lighter than the rim's others by more than the rim's
-    /// contrast, and beyond it, short of where the canopy's outer rim could
-    /// lie, the level falls back below the step's mid level (the dark shape
-    /// again, past the bar). A canopy lit by a glare is lighter too, but
-    /// stays light that far. `points_px` lie on rays from `centre`;
-    /// `min_radius_px` is the smallest radius of the ellipse searched
-    /// (a bar lies anywhere across the disc, a step onto it near the centre).
+    /// The steps that rise onto a light bar lying over the dark shape (a
+    /// glare streak below saturation): their light side is lighter than the
+    /// rim's others by more than the rim's contrast, and beyond it, short of
+    /// where the canopy's outer rim could lie, the level falls back below
+    /// the step's mid level (the dark shape again, past the bar). A canopy
+    /// lit by a glare is lighter too, but stays light that far. `points_px`
+    /// lie on rays from `centre`; `min_radius_px` is the smallest radius of
+    /// the ellipse searched (a bar lies anywhere across the disc, a step
+    /// onto it even near the centre).
     fn light_bars(
         &mut self,
         image: &GrayImage,
