@@ -21,7 +21,7 @@
 //! there, so it searches a band a tenth of the rim's radius wide on either
 //! side, enough for a blurred rim and the fit's error scaled by R/r.
 
-use super::rim;
+use super::{SATURATED_GRAY, rim};
 use crate::camera::CameraModel;
 use crate::measure::ellipse::Ellipse;
 use crate::measure::pose::{CirclePose, circle_plane_basis, cone_pose};
@@ -47,7 +47,6 @@ const MAX_JUDGED_WIDTH_RADII: f64 = 0.15;
 /// Sampling step across the rim, pixels.
 const STEP_PX: f64 = 0.5;
 /// Gray level from which a sample counts as saturated.
-const SATURATED_GRAY: f32 = 250.0;
 /// Fewest rim points in the image (and not saturated) for a pose's rim to
 /// be judged.
 const MIN_JUDGED: usize = 12;

@@ -13,6 +13,7 @@
 //! a line. Each peak's radius is the commonest distance of the edges that
 //! voted for it. The verification decides, as for the coarse candidates.
 
+use super::SATURATED_LEVEL;
 use super::coarse::Decimated;
 
 /// Smallest gradient that makes an edge pixel, gray levels per pixel of the
@@ -42,14 +43,12 @@ const NESTED_REACH: f64 = 2.0 * PEAK_SEPARATION as f64;
 /// than a circle's worth of votes more often than not, and each costs a
 /// pass over the edges.
 const NESTED_CELLS_PER_CIRCLE: usize = 4;
-/// Decimated level from which a pixel is saturated (a glare). An edge
-/// whose light side keeps rising into saturation is the glare's own (its
-/// skirt, however wide): a glare streak's two long edges are the strongest
-/// of the frame, and their votes along lines bury a disc's that the streak
-/// cuts in two. Like the rim passes' steps into saturation, they say
-/// nothing of the disc. The rise is followed at most this many decimated
-/// pixels.
-const SATURATED_LEVEL: u8 = 250;
+/// An edge whose light side keeps rising into saturation
+/// ([`super::SATURATED_LEVEL`]) is the glare's own (its skirt, however
+/// wide): a glare streak's two long edges are the strongest of the frame,
+/// and their votes along lines bury a disc's that the streak cuts in two.
+/// Like the rim passes' steps into saturation, they say nothing of the
+/// disc. The rise is followed at most this many decimated pixels.
 const MAX_SKIRT_PX: usize = 16;
 const SKIRT_DIP: u8 = 4;
 

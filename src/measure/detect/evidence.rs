@@ -4,7 +4,8 @@
 
 use super::verify::{CLIPPED_SHARE, FillLevels, RimPass};
 use super::{
-    Detector, Reject, SATURATED_GRAY, Verified, angle_gap, canopy, median, polar_radius, rim,
+    Detector, Reject, SATURATED_GRAY, VEIL_MIN_GRAY, VEIL_SIGMAS, Verified, angle_gap, canopy,
+    median, polar_radius, rim,
 };
 use crate::measure::ellipse::Ellipse;
 use image::GrayImage;
@@ -62,12 +63,6 @@ const BEYOND_FAR_SAMPLES: usize = 8;
 const BEYOND_NEAR_RADII: f64 = 0.25;
 const BEYOND_FAR_FROM: f64 = 1.5;
 const BEYOND_FAR_TO_OUTER: f64 = 0.85;
-
-/// Noise sigmas above a rim step's light side at which a sample inside the
-/// ellipse is a glare's veil, not the background seen through a hole.
-const VEIL_SIGMAS: f32 = 3.0;
-/// Gray levels added to that margin (quantisation, a sharp frame's noise).
-const VEIL_MIN_GRAY: f32 = 2.0;
 
 /// Rays and radius fractions of the fill test (inside the ellipse).
 const FILL_DIRECTIONS: usize = 24;

@@ -204,7 +204,17 @@ fn smoothing_half_for_contrast(sigma: f64, contrast: f64) -> usize {
 
 /// Gray level from which a sample counts as saturated (glare): it says
 /// nothing about the surface under it.
-const SATURATED_GRAY: f32 = 250.0;
+const SATURATED_LEVEL: u8 = 250;
+/// The same level, for interpolated samples.
+const SATURATED_GRAY: f32 = SATURATED_LEVEL as f32;
+
+/// Noise sigmas above a rim step's light side at which a level is a
+/// glare's veil (lighter than any surface beside the disc), not the
+/// background seen through a hole: the fill test's margin, and a light
+/// bar's least.
+const VEIL_SIGMAS: f32 = 3.0;
+/// Gray levels added to that margin (quantisation, a sharp frame's noise).
+const VEIL_MIN_GRAY: f32 = 2.0;
 
 /// A verified candidate.
 struct Verified {

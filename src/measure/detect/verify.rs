@@ -4,8 +4,9 @@
 
 use super::search::Seed;
 use super::{
-    Detector, Reject, SATURATED_GRAY, Verified, conic_fit, median, polar_radius,
-    polar_radius_local, ray_directions, rim, smoothing_half_for_contrast, smoothing_half_for_ramp,
+    Detector, Reject, SATURATED_GRAY, VEIL_MIN_GRAY, VEIL_SIGMAS, Verified, conic_fit, median,
+    polar_radius, polar_radius_local, ray_directions, rim, smoothing_half_for_contrast,
+    smoothing_half_for_ramp,
 };
 use crate::measure::ellipse::Ellipse;
 use image::GrayImage;
@@ -49,11 +50,6 @@ const WIDE_STEPS_PER_RADIUS: f64 = 40.0;
 /// the disc's rim and the canopy's outer rim ([`Detector::light_bars`]): the
 /// canopy's darker rim band lies beyond.
 const BAR_REACH_CANOPY_GAPS: f64 = 0.8;
-/// A bar's light side exceeds the rim's usual light side by the rim's
-/// contrast, and at the least by this many noise sigmas and gray levels
-/// (the fill test's margin for a glare's veil).
-const BAR_MIN_NOISE_SIGMAS: f64 = 3.0;
-const BAR_MIN_GRAY: f64 = 2.0;
 
 /// One narrow rim pass around an ellipse, before its canopy evidence.
 pub(super) struct RimPass {
@@ -475,9 +471,10 @@ impl Detector {
     /// where the canopy's outer rim could lie, the level falls back below
     /// the step's mid level (the dark shape again, past the bar). A canopy
     /// lit by a glare is lighter too, but stays light that far. `points_px`
-    /// lie on rays from `centre`; `min_radius_px` is the smallest radius of
-    /// the ellipse searched (a bar lies anywhere across the disc, a step
-    /// onto it even near the centre).
+    /// lie on rays from `centre` (both image pixels, as in the frame);
+    /// `min_radius_px` is the smallest radius of the ellipse searched
+    /// (undistorted pixels: a bar lies anywhere across the disc, a step onto
+    /// it even near the centre).
     fn light_bars(
         &mut self,
         image: &GrayImage,
@@ -493,7 +490,8 @@ impl Detector {
             .zip(mid_levels)
             .map(|(&c, &m)| f64::from(m) + 0.5 * c)
             .collect();
-        let margin_floor = BAR_MIN_NOISE_SIGMAS * self.noise_gray + BAR_MIN_GRAY;
+        // At the least the fill test's margin for a glare's veil.
+        let margin_floor = f64::from(VEIL_SIGMAS) * self.noise_gray + f64::from(VEIL_MIN_GRAY);
         // No step can stand out by the margin when all lie within it (the
         // usual rim: no medians taken).
         let (low, high) = lights
@@ -709,9 +707,11 @@ impl Detector {
         // but count against it as an occluder's would: the disc's rim is
         // hidden there, and a sliver of the disc beside the bar must not
         // score as a whole disc.
-        let bars = self.light_bars(image, centre, &points_px, &contrasts, &mid_levels, start.b);
+        let mut bars = self.light_bars(image, centre, &points_px, &contrasts, &mid_levels, start.b);
         // A step into saturation is the glare's, whatever its light.
-        let bars: Vec<bool> = bars.iter().zip(&glares).map(|(&b, &g)| b && !g).collect();
+        for (bar, &glare) in bars.iter_mut().zip(&glares) {
+            *bar &= !glare;
+        }
         let barred = bars.iter().filter(|&&b| b).count();
         // Their mid levels still say where the disc's inside is dark: the
         // glare's skirt lifts the disc's levels beside the streak. Each is
