@@ -44,6 +44,19 @@ const MIN_TOLERANCE_PX: f64 = 1.5;
 /// rim's radius are not judged (the rim's band, a few percent of its
 /// radius, is smeared out there).
 const MAX_JUDGED_WIDTH_RADII: f64 = 0.15;
+/// The strongest brightening across the predicted rim must exceed this
+/// many sigmas of the frame's pixel noise. The difference of two bilinear
+/// samples of independent pixel noise has a standard deviation of about
+/// one sigma (0.9 to 1.4); the strongest of the search band's few dozen
+/// differences reaches two sigmas on noise alone about half the time, and
+/// half the band lies within the tolerance of the predicted rim. Plain sky
+/// around a dark shape then shows about a quarter of a canopy rim, half of
+/// `min_canopy_fraction`; without this floor it showed half, and in noisy
+/// frames stars' arms and flowers' petals passed the canopy test on noise
+/// (simulator sweep: 8 of 480 drogue-free frames). 2.5 and 3 sigmas lose
+/// drogues whose canopy rim stands 3 to 4 sigmas out of 20 gray levels of
+/// noise.
+const NOISE_BRIGHTENING_SIGMAS: f32 = 2.0;
 /// Sampling step across the rim, pixels.
 const STEP_PX: f64 = 0.5;
 /// Gray level from which a sample counts as saturated.
@@ -92,6 +105,10 @@ pub struct DrogueCircles {
 pub struct RimEdge<'a> {
     /// Smallest outward brightening, gray levels.
     pub min_step_gray: f32,
+    /// The frame's pixel noise (standard deviation), gray levels: an
+    /// outward brightening must also stand above what the noise alone
+    /// makes somewhere in the search band ([`NOISE_BRIGHTENING_SIGMAS`]).
+    pub noise_gray: f32,
     /// Width of the disc's own rim step by direction: (image angle about
     /// the ellipse's centre, radians; width, pixels), sorted by angle.
     /// Motion blur widens both rims alike along its direction: there the
@@ -242,7 +259,10 @@ fn pose_ring(
         let tolerance = (TOLERANCE_RADII * radius_px)
             .max(MIN_TOLERANCE_PX)
             .max(0.25 * width);
-        let brightening = strongest >= edge.min_step_gray && offset.abs() <= tolerance;
+        let min_rise = edge
+            .min_step_gray
+            .max(NOISE_BRIGHTENING_SIGMAS * edge.noise_gray);
+        let brightening = strongest >= min_rise && offset.abs() <= tolerance;
         let band_px = (drogue.canopy_band_m / canopy_radius_m) * radius_px;
         let mut outer_edge = || {
             // The background is read well beyond the rim's band: a band
@@ -478,6 +498,7 @@ mod tests {
 
     const EDGE: RimEdge = RimEdge {
         min_step_gray: 20.0,
+        noise_gray: 0.0,
         widths: &[(0.0, 2.0)],
         mids: &[(0.0, 90.0)],
         contrast_gray: 140.0,
@@ -518,6 +539,7 @@ mod tests {
         // least half of `min_contrast_gray` (12).
         let edge = RimEdge {
             min_step_gray: 6.0,
+            noise_gray: 0.0,
             widths: &[(0.0, 2.0)],
             mids: &[(0.0, 147.0)],
             contrast_gray: 55.0,
@@ -558,6 +580,7 @@ mod tests {
         });
         let edge = RimEdge {
             min_step_gray: 6.0,
+            noise_gray: 0.0,
             widths: &[(0.0, 2.0)],
             mids: &[(0.0, 147.0)],
             contrast_gray: 55.0,
@@ -588,6 +611,65 @@ mod tests {
         };
         let s = support(&render(true), &inner, EDGE);
         assert!(s.is_some_and(|s| s < 0.1), "{s:?}");
+    }
+
+    /// `image` with Gaussian pixel noise of `sigma` gray levels added
+    /// (fixed seed), clipped to 0-255.
+    fn with_noise(image: &GrayImage, sigma: f64, seed: u64) -> GrayImage {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+        let mut noisy = image.clone();
+        for p in noisy.pixels_mut() {
+            // Box-Muller.
+            let (u, v): (f64, f64) = (rng.random_range(1e-12..1.0), rng.random());
+            let n = (-2.0 * u.ln()).sqrt() * (std::f64::consts::TAU * v).cos();
+            p.0[0] = (f64::from(p.0[0]) + sigma * n).round().clamp(0.0, 255.0) as u8;
+        }
+        noisy
+    }
+
+    /// A dark disc in plain sky, in noise: there is no canopy rim, and the
+    /// strongest brightening across each predicted rim point is the
+    /// noise's. What the test finds must stay well below the share the
+    /// detector requires (`min_canopy_fraction`, 0.5); before the noise
+    /// floor it found about half (0.46 to 0.56 here).
+    #[test]
+    fn noise_alone_shows_no_canopy_rim() {
+        // A weak disc (47 gray levels, as a star's arm in haze) judged with
+        // the least step the detector asks: 6 gray levels.
+        let bare = render_levels([120, 167, 167, 167]);
+        for (sigma, seed) in [(4.0, 1), (7.0, 2), (12.0, 3), (20.0, 4)] {
+            let edge = RimEdge {
+                min_step_gray: 6.0,
+                noise_gray: sigma as f32,
+                widths: &[(0.0, 2.0)],
+                mids: &[(0.0, 143.0)],
+                contrast_gray: 47.0,
+            };
+            let image = with_noise(&bare, sigma, seed);
+            let s = support(&image, &disc(), edge);
+            assert!(s.is_some_and(|s| s < 0.35), "noise {sigma}: {s:?}");
+        }
+    }
+
+    /// The drogue's canopy rim, a band 40 gray levels darker than the sky,
+    /// is still seen nearly all round in noise of a tenth to a third of
+    /// that step.
+    #[test]
+    fn a_canopy_rim_in_noise_is_seen() {
+        let drogue = render_levels([60, 150, 110, 150]);
+        for (sigma, seed) in [(4.0, 5), (8.0, 6), (12.0, 7)] {
+            let edge = RimEdge {
+                min_step_gray: 9.0,
+                noise_gray: sigma as f32,
+                widths: &[(0.0, 2.0)],
+                mids: &[(0.0, 105.0)],
+                contrast_gray: 90.0,
+            };
+            let image = with_noise(&drogue, sigma, seed);
+            let s = support(&image, &disc(), edge);
+            assert!(s.is_some_and(|s| s > 0.9), "noise {sigma}: {s:?}");
+        }
     }
 
     /// A dark flower whose round centre is the candidate: four arms, each

@@ -259,6 +259,7 @@ impl Detector {
         }
         let edge = canopy::RimEdge {
             min_step_gray: (0.1 * rim_contrast).max(0.5 * self.cfg.min_contrast_gray) as f32,
+            noise_gray: self.noise_gray as f32,
             widths: &widths,
             mids: &mids,
             contrast_gray: rim_contrast as f32,
