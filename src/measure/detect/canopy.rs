@@ -107,7 +107,7 @@ pub struct RimEdge<'a> {
     pub min_step_gray: f32,
     /// The frame's pixel noise (standard deviation), gray levels: an
     /// outward brightening must also stand above what the noise alone
-    /// makes somewhere in the search band ([`NOISE_BRIGHTENING_SIGMAS`]).
+    /// makes somewhere in the search band (`NOISE_BRIGHTENING_SIGMAS`).
     pub noise_gray: f32,
     /// Width of the disc's own rim step by direction: (image angle about
     /// the ellipse's centre, radians; width, pixels), sorted by angle.

@@ -1189,3 +1189,55 @@ fn the_axis_ratio_is_judged_along_the_line_of_sight() {
     let round_enough = Ellipse::new(640.0, 480.0, 70.0, 18.2, radial);
     assert!(detector.plausible(&round_enough, 1.0));
 }
+
+/// A candidate whose canopy rim shows nearly all round is the drogue even
+/// when part of its own rim is hidden and it scores below `accept_score`:
+/// it ends the search ([`search::CANOPY_CONFIRMS`]). Two drogues side by
+/// side: the larger, tried first, has a bite of canopy taken out of its
+/// disc; the smaller, clear one, which verifies above `accept_score` on
+/// its own, is then not verified.
+#[test]
+fn a_candidate_its_canopy_confirms_ends_the_search() {
+    let (w, h) = (800, 300);
+    let cam = camera(w, h);
+    let accept = Config::embedded().detect.accept_score;
+    let big = Ellipse::new(200.0, 150.0, 50.0, 48.0, 0.0);
+    let mut bitten = Scene::new(big);
+    bitten.bite = Some(([200.0, 190.0], 40.0));
+    let left = bitten.render(w, h, 2.0, 3);
+    let small = Ellipse::new(600.0, 150.0, 30.0, 29.0, 0.0);
+    let right = Scene::new(small).render(w, h, 2.0, 4);
+    // The clear drogue alone is a candidate that ends the search by score.
+    let alone = detector(&cam).verify_candidates(&right, accept);
+    assert!(
+        alone.iter().any(|v| v.score >= accept),
+        "{:?}",
+        scores(&alone)
+    );
+    let both = GrayImage::from_fn(w, h, |x, y| {
+        if x < w / 2 {
+            *left.get_pixel(x, y)
+        } else {
+            *right.get_pixel(x, y)
+        }
+    });
+    let verified = detector(&cam).verify_candidates(&both, accept);
+    assert_eq!(verified.len(), 1, "{:?}", scores(&verified));
+    let v = &verified[0];
+    assert!(
+        (v.ellipse.cx - big.cx).hypot(v.ellipse.cy - big.cy) < 5.0,
+        "{:?}",
+        v.ellipse
+    );
+    assert!(v.score < accept, "{}", v.score);
+    assert!(
+        v.canopy.is_some_and(|c| c >= search::CANOPY_CONFIRMS),
+        "{:?}",
+        v.canopy
+    );
+}
+
+/// (score, canopy evidence) of each verified candidate.
+fn scores(verified: &[Verified]) -> Vec<(f64, Option<f64>)> {
+    verified.iter().map(|v| (v.score, v.canopy)).collect()
+}
