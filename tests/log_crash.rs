@@ -135,13 +135,17 @@ fn sigkill_loses_at_most_a_second_and_recovery_indexes_the_rest() {
 
     // recover by hand: complete, indexed, everything that was readable.
     let fixed = dir.path().join("fixed.mcap.out");
+    // The reader stops at the chunk the kill cut short; recovery also
+    // keeps that chunk's complete messages (when the kill fell while the
+    // writer was streaming one, as it does more often on a busy machine).
     let report = recover::recover(&cut_file, &fixed).unwrap();
     assert!(report.cut.is_some());
-    assert_eq!(report.messages, messages);
+    assert_eq!(report.readable_by_reader, messages);
+    assert!(report.messages >= messages, "{report:?}");
     assert!(reader::is_complete(&fixed).unwrap());
     let bytes = std::fs::read(&fixed).unwrap();
     let summary = mcap::Summary::read(&bytes).unwrap().unwrap();
-    assert_eq!(summary.stats.unwrap().message_count, messages);
+    assert_eq!(summary.stats.unwrap().message_count, report.messages);
     assert!(!summary.chunk_indexes.is_empty());
     let fixed_mcap = dir.path().join("fixed.mcap");
     std::fs::rename(&fixed, &fixed_mcap).unwrap();
@@ -157,9 +161,15 @@ fn sigkill_loses_at_most_a_second_and_recovery_indexes_the_rest() {
     let summary = log.finish().unwrap();
     assert_eq!(summary.recovered, vec![cut_file.clone()]);
     assert!(reader::is_complete(&cut_file).unwrap());
-    let (seqs_after, _, cut_after) = readable_frames(&cut_file);
+    let (seqs_after, messages_after, cut_after) = readable_frames(&cut_file);
     assert!(!cut_after);
-    assert_eq!(seqs_after, seqs);
+    assert_eq!(messages_after, report.messages);
+    assert_eq!(
+        seqs_after,
+        (0..seqs_after.len() as u64).collect::<Vec<_>>(),
+        "in order, no gap"
+    );
+    assert!(seqs_after.len() >= seqs.len());
     let mut kept = cut_file.into_os_string();
     kept.push(".cut");
     assert!(Path::new(&kept).exists());
