@@ -44,6 +44,9 @@ const MIN_TOLERANCE_PX: f64 = 1.5;
 /// rim's radius are not judged (the rim's band, a few percent of its
 /// radius, is smeared out there).
 const MAX_JUDGED_WIDTH_RADII: f64 = 0.15;
+/// The narrowest step width a rim point is judged with, pixels: a step is
+/// never taken narrower than this, however sharp.
+const MIN_STEP_WIDTH_PX: f64 = 2.0;
 /// The strongest brightening across the predicted rim must exceed this
 /// many sigmas of the frame's pixel noise. The difference of two bilinear
 /// samples of independent pixel noise has a standard deviation of about
@@ -144,6 +147,16 @@ impl RimEdge<'_> {
     }
 }
 
+/// The smallest disc radius, pixels, at which the canopy rim can be judged
+/// however sharp the disc's step: there the canopy rim's radius (`R / r`
+/// times the disc's) is `MIN_STEP_WIDTH_PX / MAX_JUDGED_WIDTH_RADII`. A
+/// disc whose minor semi-axis is smaller has no judged canopy point along
+/// that axis.
+pub fn smallest_judged_radius_px(drogue: DrogueCircles) -> f64 {
+    let ratio = drogue.canopy_radius_m / drogue.inner_radius_m;
+    MIN_STEP_WIDTH_PX / (MAX_JUDGED_WIDTH_RADII * ratio)
+}
+
 /// The entry of `by_angle` (sorted by angle, each within a turn of zero)
 /// nearest in angle to `angle`: one of the two entries either side of it,
 /// the list read as a circle. A binary search, not a scan: this runs twice
@@ -223,7 +236,7 @@ fn pose_ring(
         let out = [d[0] / len, d[1] / len];
         let radius_px = (p[0] - centre[0]).hypot(p[1] - centre[1]);
         let angle = (p[1] - centre[1]).atan2(p[0] - centre[0]);
-        let width = edge.width_at(angle).max(2.0);
+        let width = edge.width_at(angle).max(MIN_STEP_WIDTH_PX);
         if width > MAX_JUDGED_WIDTH_RADII * radius_px {
             continue;
         }
@@ -633,6 +646,15 @@ mod tests {
     /// noise's. What the test finds must stay well below the share the
     /// detector requires (`min_canopy_fraction`, 0.5); before the noise
     /// floor it found about half (0.46 to 0.56 here).
+    /// The smallest judged radius, from its definition: a 2 px step is
+    /// judged up to 15 % of the canopy rim's radius, which is `R / r` disc
+    /// radii: 2 / (0.15 x 0.33 / 0.15) = 6.06 px for the test's drogue.
+    #[test]
+    fn the_smallest_judged_radius_follows_from_the_widest_judged_step() {
+        let r = smallest_judged_radius_px(DROGUE);
+        assert!((r - 2.0 / (0.15 * 0.33 / 0.15)).abs() < 1e-9, "{r}");
+    }
+
     #[test]
     fn noise_alone_shows_no_canopy_rim() {
         // A weak disc (47 gray levels, as a star's arm in haze) judged with

@@ -2,6 +2,7 @@
 //! and edge voting), their seeds, the budget and order in which they are
 //! verified, and the inner disc preferred to the canopy's rim.
 
+use super::canopy;
 use super::coarse::{self, Blob};
 use super::edges::EdgeCircle;
 use super::{Detector, Reject, Verified};
@@ -543,6 +544,12 @@ impl Detector {
             "candidate"
         );
         let v = self.prefer_inner_disc(image, r?, index);
+        // Verification by the drogue's structure: a candidate too thin for
+        // its canopy rim to be judged along its minor axis rests on its
+        // darkness alone.
+        if v.ellipse.b < canopy::smallest_judged_radius_px(self.drogue) {
+            return Err(Reject::TooSmall(v.ellipse.b));
+        }
         let ends = ends_search(&v, accept);
         verified.push(v);
         Ok(ends)

@@ -255,16 +255,22 @@ fn probe_hiding_forty_percent_of_the_rim() {
     assert!(truth.max_param_error_px(&e) < 0.15, "{e:?}");
 }
 
+/// A far disc, 7 px in radius (0.15 m at about 29 m), is found and
+/// measured; one whose minor semi-axis is below the smallest radius at
+/// which its canopy can be judged (6.1 px, `canopy::smallest_judged_radius_px`)
+/// rests on its darkness alone and is not (6.2 x 5.6 px: about 33 m).
 #[test]
 fn small_far_disc_is_found() {
     let (w, h) = (320, 240);
     let cam = camera(w, h);
-    // 6 px radius: 0.15 m at about 33 m.
-    let truth = Ellipse::new(151.3, 97.6, 6.2, 5.6, 0.3);
+    let truth = Ellipse::new(151.3, 97.6, 7.0, 6.5, 0.3);
     let img = Scene::new(truth).render(w, h, 1.5, 3);
     let c = detector(&cam).detect(&img, None).expect("detected");
     let e = fit_points(&c);
     assert!(truth.max_param_error_px(&e) < 0.15, "{e:?}");
+    let too_thin = Ellipse::new(151.3, 97.6, 6.2, 5.6, 0.3);
+    let img = Scene::new(too_thin).render(w, h, 1.5, 3);
+    assert!(detector(&cam).detect(&img, None).is_none());
 }
 
 #[test]
