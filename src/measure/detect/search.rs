@@ -547,8 +547,14 @@ impl Detector {
         // Verification by the drogue's structure: a candidate too thin for
         // its canopy rim to be judged along its minor axis rests on its
         // darkness alone.
-        if v.ellipse.b < canopy::smallest_judged_radius_px(self.drogue) {
-            return Err(Reject::TooSmall(v.ellipse.b));
+        let minor_px = v.ellipse.a.min(v.ellipse.b);
+        if minor_px < canopy::smallest_judged_radius_px(self.drogue) {
+            tracing::debug!(
+                centre_px = ?[v.ellipse.cx.round(), v.ellipse.cy.round()],
+                minor_px,
+                "too thin for its canopy rim to be judged: not the drogue"
+            );
+            return Err(Reject::TooSmall(minor_px));
         }
         let ends = ends_search(&v, accept);
         verified.push(v);
