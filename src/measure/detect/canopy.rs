@@ -147,7 +147,7 @@ impl RimEdge<'_> {
     }
 }
 
-/// The smallest disc radius, pixels, at which the canopy rim can be judged
+/// The smallest disc radius, undistorted pixels, at which the canopy rim can be judged
 /// however sharp the disc's step: there the canopy rim's radius (`R / r`
 /// times the disc's) is `MIN_STEP_WIDTH_PX / MAX_JUDGED_WIDTH_RADII`. A
 /// disc whose minor semi-axis is smaller has no judged canopy point along

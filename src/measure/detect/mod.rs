@@ -278,7 +278,7 @@ enum Reject {
     /// The seed's first fit or settled pass is the rim of a candidate
     /// already verified, or that candidate's canopy rim.
     Known,
-    /// A full-frame candidate whose minor semi-axis (pixels) is below
+    /// A full-frame candidate whose minor semi-axis (undistorted pixels) is below
     /// [`canopy::smallest_judged_radius_px`]: too thin for its canopy rim
     /// to be judged along that axis, it rests on its darkness alone.
     TooSmall(f64),
