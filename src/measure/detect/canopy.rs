@@ -180,7 +180,10 @@ pub(crate) fn nearest<T>(by_angle: &[(f64, T)], angle: f64) -> Option<&(f64, T)>
 /// shares of judged rim points with an outward brightening of at least
 /// `edge.min_step_gray` near the predicted rim. `None` when neither pose can
 /// be judged (degenerate ellipse, fewer than `MIN_JUDGED` points in the
-/// image).
+/// image). The second pose is read only as far as it could still show
+/// more than the first: its points cost two profiles each, and once it
+/// cannot win (a clear canopy shows on every point of the first) the
+/// larger share is known.
 pub fn ring_support(
     image: &GrayImage,
     camera: &CameraModel,
@@ -191,36 +194,64 @@ pub fn ring_support(
     scratch: &mut Vec<f32>,
 ) -> Option<f64> {
     let poses = cone_pose(ellipse, camera, drogue.inner_radius_m)?;
-    poses
-        .iter()
-        .filter_map(|pose| {
-            let (judged, seen) = pose_ring(image, camera, pose, drogue, edge, profile, scratch);
-            (judged >= MIN_JUDGED).then(|| seen as f64 / judged as f64)
-        })
-        .max_by(f64::total_cmp)
+    let mut best: Option<Share> = None;
+    for pose in &poses {
+        let share = pose_ring(image, camera, pose, drogue, edge, best, profile, scratch);
+        if let Some(share) = share.filter(|s| s.judged >= MIN_JUDGED)
+            && best.is_none_or(|b| share.exceeds(b))
+        {
+            best = Some(share);
+        }
+    }
+    best.map(|b| b.seen as f64 / b.judged as f64)
 }
 
-/// (judged, with an edge) along the canopy rim that `pose` predicts.
+/// Rim points judged along a pose's predicted canopy rim, and those with
+/// an edge.
+#[derive(Clone, Copy, Debug)]
+struct Share {
+    judged: usize,
+    seen: usize,
+}
+
+impl Share {
+    /// Whether this share is larger than `other`'s (exact, in integers).
+    fn exceeds(self, other: Share) -> bool {
+        self.seen * other.judged > other.seen * self.judged
+    }
+}
+
+/// (judged, with an edge) along the canopy rim that `pose` predicts;
+/// `None` as soon as the points left could no longer make the share
+/// larger than `to_beat`'s, had every one of them an edge.
+#[allow(clippy::too_many_arguments)]
 fn pose_ring(
     image: &GrayImage,
     camera: &CameraModel,
     pose: &CirclePose,
     drogue: DrogueCircles,
     edge: RimEdge,
+    to_beat: Option<Share>,
     profile: &mut Vec<f32>,
     scratch: &mut Vec<f32>,
-) -> (usize, usize) {
+) -> Option<Share> {
     let canopy_radius_m = drogue.canopy_radius_m;
-    let Some((e1, e2)) = circle_plane_basis(&pose.normal_camera) else {
-        return (0, 0);
-    };
+    let (e1, e2) = circle_plane_basis(&pose.normal_camera)?;
     // The rim's radius in pixels, for the width of the search.
-    let Some(centre) = camera.project_px(&pose.centre_camera_m) else {
-        return (0, 0);
-    };
+    let centre = camera.project_px(&pose.centre_camera_m)?;
     let inner_radius_m = drogue.inner_radius_m;
     let (mut judged, mut seen) = (0, 0);
     for k in 0..SAMPLES {
+        let left = SAMPLES - k;
+        if to_beat.is_some_and(|b| {
+            !Share {
+                judged: judged + left,
+                seen: seen + left,
+            }
+            .exceeds(b)
+        }) {
+            return None;
+        }
         let t = std::f64::consts::TAU * k as f64 / SAMPLES as f64;
         let radial = t.cos() * e1 + t.sin() * e2;
         let Some((p, d)) = camera.project_px_with_derivative(
@@ -326,7 +357,7 @@ fn pose_ring(
             seen += 1;
         }
     }
-    (judged, seen)
+    Some(Share { judged, seen })
 }
 
 /// Whether the canopy between the disc and its outer rim, along the 3-D
@@ -641,11 +672,6 @@ mod tests {
         noisy
     }
 
-    /// A dark disc in plain sky, in noise: there is no canopy rim, and the
-    /// strongest brightening across each predicted rim point is the
-    /// noise's. What the test finds must stay well below the share the
-    /// detector requires (`min_canopy_fraction`, 0.5); before the noise
-    /// floor it found about half (0.46 to 0.56 here).
     /// The smallest judged radius, from its definition: a 2 px step is
     /// judged up to 15 % of the canopy rim's radius, which is `R / r` disc
     /// radii: 2 / (0.15 x 0.33 / 0.15) = 6.06 px for the test's drogue.
@@ -655,6 +681,11 @@ mod tests {
         assert!((r - 2.0 / (0.15 * 0.33 / 0.15)).abs() < 1e-9, "{r}");
     }
 
+    /// A dark disc in plain sky, in noise: there is no canopy rim, and the
+    /// strongest brightening across each predicted rim point is the
+    /// noise's. What the test finds must stay well below the share the
+    /// detector requires (`min_canopy_fraction`, 0.5); before the noise
+    /// floor it found about half (0.46 to 0.56 here).
     #[test]
     fn noise_alone_shows_no_canopy_rim() {
         // A weak disc (47 gray levels, as a star's arm in haze) judged with
@@ -672,6 +703,65 @@ mod tests {
             let s = support(&image, &disc(), edge);
             assert!(s.is_some_and(|s| s < 0.35), "noise {sigma}: {s:?}");
         }
+    }
+
+    /// The second pose, read only while it could still show more than the
+    /// first, gives the share both poses read whole give: on ellipses of
+    /// the drogue, tilted and not, beside it and inside it, in noise.
+    #[test]
+    fn the_second_pose_read_in_part_gives_the_share_read_whole() {
+        let whole = |image: &GrayImage, ellipse: &Ellipse, edge: RimEdge| {
+            let poses = cone_pose(ellipse, &camera(), DROGUE.inner_radius_m)?;
+            poses
+                .iter()
+                .filter_map(|pose| {
+                    let (mut profile, mut scratch) = (Vec::new(), Vec::new());
+                    let s = pose_ring(
+                        image,
+                        &camera(),
+                        pose,
+                        DROGUE,
+                        edge,
+                        None,
+                        &mut profile,
+                        &mut scratch,
+                    )?;
+                    (s.judged >= MIN_JUDGED).then(|| s.seen as f64 / s.judged as f64)
+                })
+                .max_by(f64::total_cmp)
+        };
+        let mut compared = 0;
+        for (image, sigma) in [(render(true), 0.0), (render(false), 0.0)]
+            .into_iter()
+            .chain(
+                [(4.0, 1), (12.0, 2)]
+                    .map(|(sigma, seed)| (with_noise(&render(true), sigma, seed), sigma)),
+            )
+        {
+            let edge = RimEdge {
+                noise_gray: sigma as f32,
+                ..EDGE
+            };
+            for (a, b, theta, dx) in [
+                (60.0, 60.0, 0.0, 0.0),
+                (60.0, 45.0, 0.4, 0.0),
+                (60.0, 30.0, -1.0, 3.0),
+                (45.0, 45.0, 0.0, 20.0),
+                (35.0, 30.0, 0.2, 0.0),
+            ] {
+                let ellipse = Ellipse {
+                    cx: 320.0 + dx,
+                    a,
+                    b,
+                    theta,
+                    ..disc()
+                };
+                let expected = whole(&image, &ellipse, edge);
+                assert_eq!(support(&image, &ellipse, edge), expected, "{ellipse:?}");
+                compared += usize::from(expected.is_some());
+            }
+        }
+        assert!(compared >= 15, "{compared}");
     }
 
     /// The drogue's canopy rim, a band 40 gray levels darker than the sky,
