@@ -202,6 +202,60 @@ pub fn refine(
     Some(current)
 }
 
+/// The points of the strongest straight edge among `points` (a ray pass's
+/// rim points, in ray order): of the lines through two points at most
+/// three apart in the list, the one with the most points within
+/// `tolerance_px`. `None` when it has fewer than `min_points` or they span
+/// less than `min_span_px` along it. Neighbouring rays' points define the
+/// lines: an edge crossing the rays gives runs of them, and the pairs are
+/// a few per point, not all pairs.
+pub fn straight_edge(
+    points: &[[f64; 2]],
+    tolerance_px: f64,
+    min_points: usize,
+    min_span_px: f64,
+) -> Option<Vec<usize>> {
+    let n = points.len();
+    // A line: a point on it and its unit normal.
+    let distance = |p: [f64; 2], normal: [f64; 2], s: &[f64; 2]| {
+        ((s[0] - p[0]) * normal[0] + (s[1] - p[1]) * normal[1]).abs()
+    };
+    let mut best: Option<(usize, [f64; 2], [f64; 2])> = None;
+    for i in 0..n {
+        for j in (i + 1..=i + 3).map(|j| j % n).filter(|&j| j != i) {
+            let (p, q) = (points[i], points[j]);
+            let (dx, dy) = (q[0] - p[0], q[1] - p[1]);
+            let len = dx.hypot(dy);
+            if !(len > 0.0 && len.is_finite()) {
+                continue;
+            }
+            let normal = [-dy / len, dx / len];
+            let count = points
+                .iter()
+                .filter(|s| distance(p, normal, s) <= tolerance_px)
+                .count();
+            if best.is_none_or(|b| count > b.0) {
+                best = Some((count, p, normal));
+            }
+        }
+    }
+    let (count, p, normal) = best?;
+    if count < min_points {
+        return None;
+    }
+    let on: Vec<usize> = (0..n)
+        .filter(|&i| distance(p, normal, &points[i]) <= tolerance_px)
+        .collect();
+    let along = |i: &usize| (points[*i][0] - p[0]) * normal[1] - (points[*i][1] - p[1]) * normal[0];
+    let (lo, hi) = on
+        .iter()
+        .map(along)
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), t| {
+            (lo.min(t), hi.max(t))
+        });
+    (hi - lo >= min_span_px).then_some(on)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -272,5 +326,45 @@ mod tests {
         pts.extend((0..30).map(|k| [150.0 + k as f64 * 3.0, 190.0 + k as f64 * 0.5]));
         let e = ransac_ellipse(&pts, 1.0, 200, 7).unwrap();
         assert!(truth.max_param_error_px(&e) < 1e-6, "{e:?}");
+    }
+
+    /// A ray pass's rim points around a circle: one per ray, every 7.5
+    /// degrees.
+    fn circle_points(r: f64) -> Vec<[f64; 2]> {
+        (0..48)
+            .map(|k| {
+                let t = std::f64::consts::TAU * k as f64 / 48.0;
+                [100.0 + r * t.cos(), 100.0 + r * t.sin()]
+            })
+            .collect()
+    }
+
+    #[test]
+    fn a_circles_rim_has_no_straight_edge() {
+        for r in [10.0_f64, 30.0, 100.0] {
+            let tolerance = (0.03 * r).max(1.0);
+            assert_eq!(
+                straight_edge(&circle_points(r), tolerance, 8, 1.5 * r),
+                None
+            );
+        }
+    }
+
+    #[test]
+    fn an_edge_across_the_rays_is_found_and_only_it() {
+        // The rays from the centre toward a line 10 px off it, at x = 110,
+        // meet it instead of the rim of radius 30 (a streak over the disc):
+        // 19 rays, over 48 px of it.
+        let mut points = circle_points(30.0);
+        let mut on_line = Vec::new();
+        for (k, p) in points.iter_mut().enumerate() {
+            let (dx, dy) = (p[0] - 100.0, p[1] - 100.0);
+            if dx > 10.0 {
+                *p = [110.0, 100.0 + dy * 10.0 / dx];
+                on_line.push(k);
+            }
+        }
+        assert!(on_line.len() >= 8, "{on_line:?}");
+        assert_eq!(straight_edge(&points, 1.0, 8, 45.0), Some(on_line));
     }
 }

@@ -44,6 +44,22 @@ const NOISE_TOLERANCE_SIGMAS: f64 = 3.0;
 /// one rim ([`same_rim`]).
 const SAME_RIM: f64 = 0.05;
 
+/// Fewest rim points of a seed's wide pass worth a fit.
+const MIN_WIDE_POINTS: usize = 8;
+/// Straight edges among a wide pass's rim points: at least this many
+/// points on a line (within the fit's tolerance) spanning at least this
+/// many seed radii. Eight rays (52 degrees) of a circle lie on no line
+/// within the 3 % tolerance, and the chord of a disc's rim that a line
+/// could follow is shorter than its diameter only where the disc is seen
+/// nearly edge on; a streak crossing the disc spans it and more.
+const STRAIGHT_EDGE_MIN_POINTS: usize = 8;
+const STRAIGHT_EDGE_MIN_SPAN_RADII: f64 = 1.5;
+const MAX_STRAIGHT_EDGES: usize = 2;
+/// A wide pass's fit without its straight edges that is within this share
+/// of the first fit's size of it is that fit again: its narrow passes
+/// would end as the first's did. Not [`SAME_RIM`]: narrow passes started
+/// 5 % apart can settle on different edges (a probe's and the disc's).
+const SAME_WIDE_FIT: f64 = 0.01;
 /// Samples per seed radius on the rays of a seed's wide first pass.
 const WIDE_STEPS_PER_RADIUS: f64 = 40.0;
 /// A light bar over the disc ends within this share of the gap between
@@ -216,8 +232,14 @@ fn drop_marked<T>(v: &mut Vec<T>, marked: &[bool]) {
 /// is [`DetectConfig::rim_search_fraction`](super::DetectConfig) of the
 /// radius, 10 % by default), so both settle on the same ellipse.
 fn same_rim(a: &Ellipse, b: &Ellipse) -> bool {
-    let close = |x: f64, y: f64| (x / y - 1.0).abs() <= SAME_RIM;
-    (a.cx - b.cx).hypot(a.cy - b.cy) <= SAME_RIM * a.b && close(a.a, b.a) && close(a.b, b.b)
+    within_share(a, b, SAME_RIM)
+}
+
+/// Whether `b`'s centre and axes are within `share` of `a`'s size of
+/// `a`'s.
+fn within_share(a: &Ellipse, b: &Ellipse, share: f64) -> bool {
+    let close = |x: f64, y: f64| (x / y - 1.0).abs() <= share;
+    (a.cx - b.cx).hypot(a.cy - b.cy) <= share * a.b && close(a.a, b.a) && close(a.b, b.b)
 }
 
 impl Detector {
@@ -236,6 +258,7 @@ impl Detector {
     ) -> Result<Verified, Reject> {
         let rays = 48;
         let mut points = Vec::with_capacity(rays);
+        let mut glares = Vec::with_capacity(rays);
         let c = seed.centre_px;
         // An elongated region (disc plus hose or probe) is not searched
         // along its length: the disc is across it.
@@ -261,18 +284,83 @@ impl Detector {
             ) {
                 let p = [c[0] + e.s * dir[0], c[1] + e.s * dir[1]];
                 points.push(self.camera.undistort_px(p));
+                glares.push(glare_on_light_side(&self.profile, s_min, step, &e));
             }
         }
-        if points.len() < 8 {
+        // As on the narrow passes: steps into saturated pixels (a glare
+        // streak over the disc, whose skirt's straight edges are the
+        // strongest rise on every ray that meets it) give no rim points,
+        // unless they are most of them (an overexposed canopy).
+        let glared = glares.iter().filter(|&&g| g).count();
+        if glared > 0 && 2 * glared < glares.len() {
+            points = points
+                .iter()
+                .zip(&glares)
+                .filter(|(_, glare)| !**glare)
+                .map(|(p, _)| *p)
+                .collect();
+        }
+        if points.len() < MIN_WIDE_POINTS {
             return Err(Reject::NoRim(points.len()));
         }
         let scale = seed.b_px.max(1.0);
         let tolerance = (0.03 * scale).max(1.0);
+        let first = self.wide_fit(&points, tolerance, index);
+        let verified = first
+            .ok_or(Reject::NoEllipse)
+            .and_then(|e| self.verify_from_fit(image, &e, known));
+        if matches!(verified, Ok(_) | Err(Reject::Known)) {
+            return verified;
+        }
+        // A straight edge is no rim: a light streak's or an occluder's edge
+        // across the disc is the strongest rise on every ray that meets
+        // it, and the ellipse that hugs it can gather more points than the
+        // disc's rim. The seed is tried once more without up to two such
+        // edges (a streak's or a hose's two sides), unless its fit is the
+        // first one again ([`SAME_WIDE_FIT`]).
+        let mut rest = points.clone();
+        for _ in 0..MAX_STRAIGHT_EDGES {
+            let Some(on_edge) = conic_fit::straight_edge(
+                &rest,
+                tolerance,
+                STRAIGHT_EDGE_MIN_POINTS,
+                STRAIGHT_EDGE_MIN_SPAN_RADII * scale,
+            ) else {
+                break;
+            };
+            rest = (rest.iter().enumerate())
+                .filter(|(i, _)| on_edge.binary_search(i).is_err())
+                .map(|(_, p)| *p)
+                .collect();
+        }
+        if rest.len() == points.len() || rest.len() < MIN_WIDE_POINTS {
+            return verified;
+        }
+        let Some(second) = self
+            .wide_fit(&rest, tolerance, index)
+            .filter(|e| first.is_none_or(|f| !within_share(&f, e, SAME_WIDE_FIT)))
+        else {
+            return verified;
+        };
+        let again = self.verify_from_fit(image, &second, known);
+        tracing::trace!(
+            first = ?verified.as_ref().err(),
+            dropped = points.len() - rest.len(),
+            of = points.len(),
+            again = ?again.as_ref().map(|v| v.score),
+            "wide pass tried again without its straight edges"
+        );
+        if again.is_ok() { again } else { verified }
+    }
+
+    /// The robust ellipse of a wide pass's rim points (undistorted), within
+    /// `tolerance` pixels.
+    fn wide_fit(&self, points: &[[f64; 2]], tolerance: f64, index: u64) -> Option<Ellipse> {
         // Most rays on the rim: a trimmed least-squares fit will do; else
         // RANSAC (a hose or probe merged with the disc).
-        let first = conic_fit::fit_ellipse(&points)
-            .and_then(|e| conic_fit::refine(&e, &points, 3.0 * tolerance, 1))
-            .and_then(|e| conic_fit::refine(&e, &points, tolerance, 2))
+        conic_fit::fit_ellipse(points)
+            .and_then(|e| conic_fit::refine(&e, points, 3.0 * tolerance, 1))
+            .and_then(|e| conic_fit::refine(&e, points, tolerance, 2))
             .filter(|e| {
                 let c = e.to_conic();
                 let n = points
@@ -281,19 +369,28 @@ impl Detector {
                     .count();
                 n as f64 >= 0.8 * points.len() as f64
             })
-            .or_else(|| conic_fit::ransac_ellipse(&points, tolerance, 300, self.cfg.seed ^ index))
-            .ok_or(Reject::NoEllipse)?;
-        if !self.plausible(&first, 0.5) {
+            .or_else(|| conic_fit::ransac_ellipse(points, tolerance, 300, self.cfg.seed ^ index))
+    }
+
+    /// The rest of [`Self::verify_seed`] from its wide pass's ellipse
+    /// `first`: its size and shape, the narrow passes, the evidence.
+    fn verify_from_fit(
+        &mut self,
+        image: &GrayImage,
+        first: &Ellipse,
+        known: &[Verified],
+    ) -> Result<Verified, Reject> {
+        if !self.plausible(first, 0.5) {
             return Err(Reject::Implausible);
         }
-        if self.known_rim(known, &first) {
+        if self.known_rim(known, first) {
             return Err(Reject::Known);
         }
         // Candidates are compared on a sparser rim (cheaper); the winner
         // gets the full density.
         let pass = self.settled_pass(
             image,
-            &first,
+            first,
             self.scout_spacing_px(),
             self.cfg.max_rim_points,
             RimUse::Scout,
