@@ -2,9 +2,15 @@
 //! sweep frames (exact truth), the detector's inlier rim points against the
 //! TRUE ellipse. Per frame: the mean step width, the mean signed offset of
 //! the points from the true rim (outward +), the least-squares `beta` in
-//! `offset_i ~ beta * width_i`, and the points' scatter about that.
+//! `offset_i ~ beta * width_i`, and the points' scatter about that, with
+//! the settings the frame was drawn with; per level, the mean offset of its
+//! blurred and its sharp frames apart.
 //!
-//! `cargo run --release --example rim_bias -- [--frames N] [--only TEXT]`
+//! `cargo run --release --example rim_bias -- [--frames N] [--only TEXT]
+//! [--throat-shade S] [--reference DIR]`: `--throat-shade` draws every
+//! frame with a throat shadow of strength S (0 to 1, the canopy's share
+//! darkened at the disc's edge), so that blur's effect over a shaded canopy
+//! can be told from blur's alone (README, "Blur over a shaded canopy").
 
 use drogue_sim::sweep::{Sweep, standard_levels};
 use drogue_vision::camera::CameraModel;
@@ -100,6 +106,7 @@ fn main() {
     let mut frames = 20u64;
     let mut only: Option<String> = None;
     let mut reference: Option<std::path::PathBuf> = None;
+    let mut throat_shade: Option<f64> = None;
     let mut args = std::env::args().skip(1);
     while let Some(a) = args.next() {
         match a.as_str() {
@@ -111,6 +118,13 @@ fn main() {
             }
             "--only" => only = args.next(),
             "--reference" => reference = args.next().map(Into::into),
+            "--throat-shade" => {
+                throat_shade = Some(
+                    args.next()
+                        .and_then(|v| v.parse().ok())
+                        .expect("--throat-shade S (0 to 1)"),
+                );
+            }
             _ => panic!("unknown argument {a}"),
         }
     }
@@ -151,7 +165,12 @@ fn main() {
         }
         return;
     }
-    let mut sweep = Sweep::new(15);
+    let mut sweep = match throat_shade {
+        Some(strength) => Sweep::new(15)
+            .with_throat_shade(strength)
+            .expect("--throat-shade S: a share from 0 to 1"),
+        None => Sweep::new(15),
+    };
     let mut all_c: Vec<f64> = Vec::new();
     for level in standard_levels()
         .into_iter()
@@ -163,6 +182,8 @@ fn main() {
         let (mut betas, mut sum_w, mut cs) = (Vec::new(), 0.0, Vec::<f64>::new());
         let mut cvars = Vec::<f64>::new();
         let mut ks = Vec::<(f64, f64)>::new();
+        // Mean offsets of the frames drawn with and without motion blur.
+        let (mut blurred, mut sharp) = (Vec::<f64>::new(), Vec::<f64>::new());
         for index in 0..frames {
             let f = sweep.frame(&level, index);
             let Some(t) = f.drogue.filter(|t| t.expect_detect) else {
@@ -181,8 +202,9 @@ fn main() {
             let Some(r) = frame_bias(&config, &camera, &f.image, &te, index) else {
                 continue;
             };
+            let set = &f.settings;
             println!(
-                "{:<24} #{index:2} n {:4} b {:6.1} w mean {:6.2} d mean {:+.3} beta {:+.4} scatter {:.3} rms {:.3} c {:+.4}",
+                "{:<24} #{index:2} n {:4} b {:6.1} w mean {:6.2} d mean {:+.3} beta {:+.4} scatter {:.3} rms {:.3} c {:+.4} | blur {:.1} noise {:.1} haze {:.2} gain {:.2} glare {} probe {} throat {:.2}",
                 level.label(),
                 r[5],
                 r[6],
@@ -191,8 +213,25 @@ fn main() {
                 r[2],
                 r[3],
                 r[4],
-                r[7]
+                r[7],
+                set.blur_px,
+                set.read_noise_dn,
+                set.haze,
+                set.gain,
+                set.glare_width_px
+                    .map_or("-".into(), |w| format!("{w:.0}px")),
+                set.probe_bin.map_or("-".into(), |(lo, hi)| format!(
+                    "{:.0}-{:.0}%",
+                    100.0 * lo,
+                    100.0 * hi
+                )),
+                set.throat_shade
             );
+            if set.blur_px > 0.0 {
+                blurred.push(r[1]);
+            } else {
+                sharp.push(r[1]);
+            }
             betas.push(r[2]);
             cs.push(r[7]);
             cvars.push(r[8]);
@@ -219,6 +258,15 @@ fn main() {
         println!(
             "== {}: c = offset / (w^2 / rho): rms {rms_c:.4} mean {mean_c:+.4} noise-corrected rms {corrected:.4}",
             level.label()
+        );
+        let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len().max(1) as f64;
+        println!(
+            "== {}: mean offset (outward +), px: blurred frames {:+.3} ({}), sharp frames {:+.3} ({})",
+            level.label(),
+            mean(&blurred),
+            blurred.len(),
+            mean(&sharp),
+            sharp.len()
         );
         let ms = betas.iter().map(|b| b * b).sum::<f64>() / betas.len() as f64;
         println!(

@@ -263,6 +263,9 @@ pub struct SweepFrame {
 pub struct Sweep {
     seed: u64,
     renderers: Vec<(SimCamera, Renderer)>,
+    /// Throat shadow strength every drogue frame is drawn with, in place of
+    /// its level's ([`Sweep::with_throat_shade`]).
+    throat_shade: Option<f64>,
 }
 
 /// The reference data's camera (the paper's 5 mm lens on 3.75 um pixels),
@@ -328,7 +331,21 @@ impl Sweep {
         Sweep {
             seed,
             renderers: Vec::new(),
+            throat_shade: None,
         }
+    }
+
+    /// The same sweep with every drogue frame's throat shadow of this
+    /// strength (share of the canopy's radiance at the disc's edge, 0 to
+    /// 1; its width still drawn per frame), whatever its level: to tell the
+    /// shadow's effect apart from another factor's (blur merges the shadow
+    /// with the disc's step, `examples/rim_bias.rs`). The scenes are
+    /// otherwise the same frame for frame. `None` when `strength` is not a
+    /// share.
+    pub fn with_throat_shade(mut self, strength: f64) -> Option<Sweep> {
+        (0.0..1.0).contains(&strength).then_some(())?;
+        self.throat_shade = Some(strength);
+        Some(self)
     }
 
     fn renderer(&mut self, distortion: [f64; 5], look: Look) -> (SimCamera, &mut Renderer) {
@@ -359,6 +376,9 @@ impl Sweep {
         let mut rng = ChaCha8Rng::seed_from_u64(key);
         let mut s = settings(level, &mut rng);
         (s.throat_shade, s.throat_shade_width_m) = throat_shadow(level, key);
+        if let Some(strength) = self.throat_shade {
+            s.throat_shade = strength;
+        }
         let look = Look {
             sky_zenith: 0.50,
             sky_horizon: 0.68,
@@ -587,6 +607,33 @@ mod tests {
         assert_eq!(throat.throat_shade, 0.3);
         let (lo, hi) = THROAT_SHADE_WIDTH_M;
         assert!((lo..hi).contains(&throat.throat_shade_width_m));
+    }
+
+    /// A throat shadow asked of the whole sweep shades the canopy next to
+    /// the disc of a level that has none, and changes nothing else: the
+    /// same scene, the same truth, the canopy darker where the shadow
+    /// lies and nowhere lighter.
+    #[test]
+    fn a_throat_shadow_asked_for_shades_only_the_canopy_of_the_same_scene() {
+        let level = Level::new(Factor::Blur, 8.0);
+        let plain = Sweep::new(5).frame(&level, 1);
+        let shaded = Sweep::new(5)
+            .with_throat_shade(0.3)
+            .unwrap()
+            .frame(&level, 1);
+        assert_eq!(plain.settings.throat_shade, 0.0);
+        assert_eq!(shaded.settings.throat_shade, 0.3);
+        assert_eq!(plain.drogue, shaded.drogue);
+        let (mut darker, mut lighter) = (0usize, 0usize);
+        for (p, q) in plain.image.pixels().zip(shaded.image.pixels()) {
+            // The read noise is seeded per frame: the same in both.
+            darker += usize::from(q.0[0] + 2 < p.0[0]);
+            lighter += usize::from(q.0[0] > p.0[0] + 2);
+        }
+        assert!(darker > 100, "{darker} pixels darker");
+        assert_eq!(lighter, 0);
+        assert!(Sweep::new(5).with_throat_shade(1.0).is_none());
+        assert!(Sweep::new(5).with_throat_shade(f64::NAN).is_none());
     }
 
     #[test]
