@@ -96,33 +96,48 @@ fn reference_sets(c: &mut Criterion) {
             .filter(|p| p.extension().is_some_and(|x| x == "png"))
             .collect();
         names.sort();
-        let images: Vec<GrayImage> = names
+        // Each frame that reads, with its name.
+        let images: Vec<(String, GrayImage)> = names
             .iter()
-            .filter_map(|p| read_gray8(p, None).ok())
+            .filter_map(|p| {
+                let name = p.file_stem()?.to_string_lossy().into_owned();
+                Some((name, read_gray8(p, None).ok()?))
+            })
             .collect();
-        let mut times: Vec<f64> = images
+        // Best of 7 per frame.
+        let mut timed: Vec<(f64, &str)> = images
             .iter()
-            .map(|image| {
-                (0..7)
+            .map(|(name, image)| {
+                let best = (0..7)
                     .map(|_| {
                         let t = std::time::Instant::now();
                         black_box(detector.detect(black_box(image), None));
                         t.elapsed().as_secs_f64() * 1e3
                     })
-                    .fold(f64::INFINITY, f64::min)
+                    .fold(f64::INFINITY, f64::min);
+                (best, name.as_str())
             })
             .collect();
-        times.sort_by(f64::total_cmp);
+        timed.sort_by(|a, b| a.0.total_cmp(&b.0));
+        let times: Vec<f64> = timed.iter().map(|t| t.0).collect();
         if let (Some(median), Some(worst)) = (times.get(times.len() / 2), times.last()) {
+            // The slowest frames, where the tail's time goes.
+            let slowest: Vec<String> = timed
+                .iter()
+                .rev()
+                .take(3)
+                .map(|(t, name)| format!("{name} {t:.2}"))
+                .collect();
             println!(
-                "detect sets: {set}: {} frames, full-frame search median {median:.3} ms, max {worst:.3} ms",
-                times.len()
+                "detect sets: {set}: {} frames, full-frame search median {median:.3} ms, max {worst:.3} ms (slowest: {})",
+                times.len(),
+                slowest.join(", ")
             );
         }
         all.extend(times);
         c.bench_function(&format!("detect full set {set}"), |b| {
             b.iter(|| {
-                for image in &images {
+                for (_, image) in &images {
                     black_box(detector.detect(black_box(image), None));
                 }
             });
