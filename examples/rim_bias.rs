@@ -8,9 +8,10 @@
 //!
 //! `cargo run --release --example rim_bias -- [--frames N] [--only TEXT]
 //! [--throat-shade S] [--reference DIR]`: `--throat-shade` draws every
-//! frame with a throat shadow of strength S (0 to 1, the canopy's share
-//! darkened at the disc's edge), so that blur's effect over a shaded canopy
-//! can be told from blur's alone (README, "Blur over a shaded canopy").
+//! frame with a throat shadow of strength S (from 0 up to but not 1, the
+//! canopy's share darkened at the disc's edge), so that blur's effect over
+//! a shaded canopy can be told from blur's alone (README, "Blur over a
+//! shaded canopy").
 
 use drogue_sim::sweep::{Sweep, standard_levels};
 use drogue_vision::camera::CameraModel;
@@ -102,6 +103,14 @@ fn curvature_radius(e: &Ellipse, p: [f64; 2]) -> f64 {
     (e.a * e.a * st * st + e.b * e.b * ct * ct).powf(1.5) / (e.a * e.b)
 }
 
+/// The usage, after what was wrong with the arguments; exit status 2.
+fn usage(message: &str) -> ! {
+    eprintln!(
+        "{message}\nusage: rim_bias [--frames N] [--only TEXT] [--throat-shade S] [--reference DIR]"
+    );
+    std::process::exit(2)
+}
+
 fn main() {
     let mut frames = 20u64;
     let mut only: Option<String> = None;
@@ -109,23 +118,26 @@ fn main() {
     let mut throat_shade: Option<f64> = None;
     let mut args = std::env::args().skip(1);
     while let Some(a) = args.next() {
+        let mut value = |name: &str| {
+            args.next()
+                .unwrap_or_else(|| usage(&format!("{name} needs a value")))
+        };
         match a.as_str() {
             "--frames" => {
-                frames = args
-                    .next()
-                    .and_then(|v| v.parse().ok())
-                    .expect("--frames N");
+                frames = value("--frames")
+                    .parse()
+                    .unwrap_or_else(|_| usage("--frames: a whole number"));
             }
-            "--only" => only = args.next(),
-            "--reference" => reference = args.next().map(Into::into),
+            "--only" => only = Some(value("--only")),
+            "--reference" => reference = Some(value("--reference").into()),
             "--throat-shade" => {
                 throat_shade = Some(
-                    args.next()
-                        .and_then(|v| v.parse().ok())
-                        .expect("--throat-shade S (0 to 1)"),
+                    value("--throat-shade")
+                        .parse()
+                        .unwrap_or_else(|_| usage("--throat-shade: a number")),
                 );
             }
-            _ => panic!("unknown argument {a}"),
+            other => usage(&format!("unknown argument {other}")),
         }
     }
     let config = Config::embedded();
@@ -168,7 +180,7 @@ fn main() {
     let mut sweep = match throat_shade {
         Some(strength) => Sweep::new(15)
             .with_throat_shade(strength)
-            .expect("--throat-shade S: a share from 0 to 1"),
+            .unwrap_or_else(|| usage("--throat-shade: from 0 up to but not 1")),
         None => Sweep::new(15),
     };
     let mut all_c: Vec<f64> = Vec::new();

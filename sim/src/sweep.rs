@@ -336,14 +336,17 @@ impl Sweep {
     }
 
     /// The same sweep with every drogue frame's throat shadow of this
-    /// strength (share of the canopy's radiance at the disc's edge, 0 to
-    /// 1; its width still drawn per frame), whatever its level: to tell the
-    /// shadow's effect apart from another factor's (blur merges the shadow
-    /// with the disc's step, `examples/rim_bias.rs`). The scenes are
-    /// otherwise the same frame for frame. `None` when `strength` is not a
-    /// share.
+    /// strength (the share of the canopy's radiance it takes at the disc's
+    /// edge, from 0 up to but not 1; its width still drawn per frame),
+    /// whatever its level: to tell the shadow's effect apart from another
+    /// factor's (blur merges the shadow with the disc's step,
+    /// `examples/rim_bias.rs`). The scenes are otherwise the same frame for
+    /// frame (the shadow has its own random stream). `None` for a strength
+    /// outside that range (NaN included).
     pub fn with_throat_shade(mut self, strength: f64) -> Option<Sweep> {
-        (0.0..1.0).contains(&strength).then_some(())?;
+        if !(0.0..1.0).contains(&strength) {
+            return None;
+        }
         self.throat_shade = Some(strength);
         Some(self)
     }
