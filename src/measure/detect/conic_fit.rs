@@ -203,7 +203,8 @@ pub fn refine(
 }
 
 /// The points of the strongest straight edge among `points` (a ray pass's
-/// rim points, in ray order): of the lines through two points at most
+/// rim points, pixels, in ray order; their indices, ascending): of the
+/// lines through two points at most
 /// three apart in the list, the one with the most points within
 /// `tolerance_px`. `None` when it has fewer than `min_points` or they span
 /// less than `min_span_px` along it. Neighbouring rays' points define the

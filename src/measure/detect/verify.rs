@@ -293,12 +293,7 @@ impl Detector {
         // unless they are most of them (an overexposed canopy).
         let glared = glares.iter().filter(|&&g| g).count();
         if glared > 0 && 2 * glared < glares.len() {
-            points = points
-                .iter()
-                .zip(&glares)
-                .filter(|(_, glare)| !**glare)
-                .map(|(p, _)| *p)
-                .collect();
+            drop_marked(&mut points, &glares);
         }
         if points.len() < MIN_WIDE_POINTS {
             return Err(Reject::NoRim(points.len()));
