@@ -341,12 +341,19 @@ impl EdgeVoter {
     fn rises_into_glare(img: &Decimated, x: usize, y: usize, dir: [f64; 2]) -> bool {
         let mut peak = img.pixels[y * img.width + x];
         for k in 1..=MAX_SKIRT_PX {
-            let u = (x as f64 + k as f64 * dir[0] + 0.5).floor();
-            let v = (y as f64 + k as f64 * dir[1] + 0.5).floor();
-            if !(u >= 0.0 && v >= 0.0 && u < img.width as f64 && v < img.height as f64) {
+            // The nearest pixel: truncation of a non-negative coordinate
+            // plus a half is its floor (no libm call; off the frame below
+            // zero, as the floor would be).
+            let u = x as f64 + k as f64 * dir[0] + 0.5;
+            let v = y as f64 + k as f64 * dir[1] + 0.5;
+            if !(u >= 0.0 && v >= 0.0) {
                 return false;
             }
-            let p = img.pixels[v as usize * img.width + u as usize];
+            let (u, v) = (u as usize, v as usize);
+            if u >= img.width || v >= img.height {
+                return false;
+            }
+            let p = img.pixels[v * img.width + u];
             if p >= SATURATED_LEVEL {
                 return true;
             }
