@@ -184,26 +184,40 @@ pub(crate) fn nearest<T>(by_angle: &[(f64, T)], angle: f64) -> Option<&(f64, T)>
 /// more than the first: its points cost two profiles each, and once it
 /// cannot win (a clear canopy shows on every point of the first) the
 /// larger share is known.
+///
+/// With `fails_below` (the share a candidate needs), a pose is read only
+/// as far as it could still reach that share: one that cannot gives the
+/// share of the points read (below `fails_below`, as the whole ring's
+/// would be), so that a candidate without a canopy, most of those a
+/// drogue-free frame verifies, costs about half the reads. Whether the
+/// result is below `fails_below`, and any result at or above it, are
+/// those of reading every point.
+#[allow(clippy::too_many_arguments)]
 pub fn ring_support(
     image: &GrayImage,
     camera: &CameraModel,
     ellipse: &Ellipse,
     drogue: DrogueCircles,
     edge: RimEdge,
+    fails_below: Option<f64>,
     profile: &mut Vec<f32>,
     scratch: &mut Vec<f32>,
 ) -> Option<f64> {
     let poses = cone_pose(ellipse, camera, drogue.inner_radius_m)?;
     let mut best: Option<Share> = None;
     for pose in &poses {
-        let share = pose_ring(image, camera, pose, drogue, edge, best, profile, scratch);
+        let reading = Reading {
+            to_beat: best,
+            fails_below,
+        };
+        let share = pose_ring(image, camera, pose, drogue, edge, reading, profile, scratch);
         if let Some(share) = share.filter(|s| s.judged >= MIN_JUDGED)
             && best.is_none_or(|b| share.exceeds(b))
         {
             best = Some(share);
         }
     }
-    best.map(|b| b.seen as f64 / b.judged as f64)
+    best.map(Share::fraction)
 }
 
 /// Rim points judged along a pose's predicted canopy rim, and those with
@@ -219,11 +233,26 @@ impl Share {
     fn exceeds(self, other: Share) -> bool {
         self.seen * other.judged > other.seen * self.judged
     }
+
+    /// The share in `f64`, as [`ring_support`] gives it.
+    fn fraction(self) -> f64 {
+        self.seen as f64 / self.judged as f64
+    }
+}
+
+/// How far a pose's ring is read: while its share could still exceed
+/// `to_beat`'s, and reach `fails_below` ([`ring_support`]).
+#[derive(Clone, Copy)]
+struct Reading {
+    to_beat: Option<Share>,
+    fails_below: Option<f64>,
 }
 
 /// (judged, with an edge) along the canopy rim that `pose` predicts;
 /// `None` as soon as the points left could no longer make the share
-/// larger than `to_beat`'s, had every one of them an edge.
+/// larger than `reading.to_beat`'s, had every one of them an edge; the
+/// share so far as soon as they could no longer lift it to
+/// `reading.fails_below` (once [`MIN_JUDGED`] points are judged).
 #[allow(clippy::too_many_arguments)]
 fn pose_ring(
     image: &GrayImage,
@@ -231,7 +260,7 @@ fn pose_ring(
     pose: &CirclePose,
     drogue: DrogueCircles,
     edge: RimEdge,
-    to_beat: Option<Share>,
+    reading: Reading,
     profile: &mut Vec<f32>,
     scratch: &mut Vec<f32>,
 ) -> Option<Share> {
@@ -243,14 +272,17 @@ fn pose_ring(
     let (mut judged, mut seen) = (0, 0);
     for k in 0..SAMPLES {
         let left = SAMPLES - k;
-        if to_beat.is_some_and(|b| {
-            !Share {
-                judged: judged + left,
-                seen: seen + left,
-            }
-            .exceeds(b)
-        }) {
+        // The most the share could still be: every point left judged and
+        // with an edge.
+        let most = Share {
+            judged: judged + left,
+            seen: seen + left,
+        };
+        if reading.to_beat.is_some_and(|b| !most.exceeds(b)) {
             return None;
+        }
+        if judged >= MIN_JUDGED && reading.fails_below.is_some_and(|f| most.fraction() < f) {
+            return Some(Share { judged, seen });
         }
         let t = std::f64::consts::TAU * k as f64 / SAMPLES as f64;
         let radial = t.cos() * e1 + t.sin() * e2;
@@ -556,6 +588,7 @@ mod tests {
             ellipse,
             DROGUE,
             edge,
+            None,
             &mut Vec::new(),
             &mut Vec::new(),
         )
@@ -643,6 +676,64 @@ mod tests {
         assert!(s.is_some_and(|s| s < 0.1), "{s:?}");
     }
 
+    /// The drogue of [`render`] with its canopy shown over `shown` of the
+    /// turn only (the rest the disc alone on the sky).
+    fn render_partly(shown: f64) -> GrayImage {
+        let (whole, bare) = (render(true), render(false));
+        GrayImage::from_fn(640, 480, |x, y| {
+            let angle = (f64::from(y) - 240.0).atan2(f64::from(x) - 320.0);
+            let turn = (angle / std::f64::consts::TAU).rem_euclid(1.0);
+            if turn < shown {
+                *whole.get_pixel(x, y)
+            } else {
+                *bare.get_pixel(x, y)
+            }
+        })
+    }
+
+    #[test]
+    fn a_ring_read_only_while_it_could_pass_gives_the_whole_rings_verdict() {
+        let needed = 0.5;
+        let (mut passed, mut failed, mut near) = (0, 0, 0);
+        for shown in [0.0, 0.2, 0.4, 0.45, 0.5, 0.55, 0.6, 0.8, 1.0] {
+            for image in [
+                render_partly(shown),
+                with_noise(&render_partly(shown), 8.0, 3),
+            ] {
+                let whole = support(&image, &disc(), EDGE);
+                let limited = ring_support(
+                    &image,
+                    &camera(),
+                    &disc(),
+                    DROGUE,
+                    EDGE,
+                    Some(needed),
+                    &mut Vec::new(),
+                    &mut Vec::new(),
+                );
+                match whole {
+                    Some(w) if w >= needed => assert_eq!(limited, whole, "{shown}"),
+                    Some(_) => assert!(limited.is_some_and(|l| l < needed), "{shown}: {limited:?}"),
+                    None => assert_eq!(limited, None, "{shown}"),
+                }
+                let w = whole.unwrap_or(f64::NAN);
+                if w >= needed {
+                    passed += 1;
+                } else {
+                    failed += 1;
+                }
+                if (w - needed).abs() <= 0.1 {
+                    near += 1;
+                }
+            }
+        }
+        // Both verdicts, and shares close to the one needed, are covered.
+        assert!(
+            passed >= 6 && failed >= 6 && near >= 4,
+            "{passed} {failed} {near}"
+        );
+    }
+
     #[test]
     fn a_disc_without_canopy_and_a_wrong_size_show_none() {
         let bare = support(&render(false), &disc(), EDGE);
@@ -722,11 +813,14 @@ mod tests {
                         pose,
                         DROGUE,
                         edge,
-                        None,
+                        Reading {
+                            to_beat: None,
+                            fails_below: None,
+                        },
                         &mut profile,
                         &mut scratch,
                     )?;
-                    (s.judged >= MIN_JUDGED).then(|| s.seen as f64 / s.judged as f64)
+                    (s.judged >= MIN_JUDGED).then(|| s.fraction())
                 })
                 .max_by(f64::total_cmp)
         };

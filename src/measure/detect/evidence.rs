@@ -264,17 +264,21 @@ impl Detector {
             mids: &mids,
             contrast_gray: rim_contrast as f32,
         };
+        // Where the canopy is required, a share below the least needed is
+        // all that must be known of a candidate without one.
+        let canopy_required = ellipse.a >= self.cfg.canopy_required_from_px;
         let canopy = canopy::ring_support(
             image,
             &self.camera,
             &ellipse,
             self.drogue,
             edge,
+            canopy_required.then_some(self.cfg.min_canopy_fraction),
             &mut self.profile,
             &mut self.scratch,
         );
         if let Some(seen) = canopy
-            && ellipse.a >= self.cfg.canopy_required_from_px
+            && canopy_required
             && seen < self.cfg.min_canopy_fraction
         {
             return Err(Reject::NoCanopy(seen));
