@@ -411,17 +411,18 @@ impl EdgeVoter {
             |x: usize, y: usize| rows[(y - 1) * w + x] + rows[y * w + x] + rows[(y + 1) * w + x];
         // The weakest peak worth a look: a fraction of the smallest rim.
         let floor = (MIN_RIM_SHARE * std::f64::consts::TAU * r_min as f64).ceil() as u32;
-        let mut found: Vec<(usize, usize, u32)> = Vec::new();
+        // Each cell's sum where it is a candidate (voted for, at least
+        // `floor`), else 0 (a voted cell's sum is at least 1).
+        let mut sums = vec![0u32; w * h];
         for y in 1..h - 1 {
             for x in 1..w - 1 {
                 if self.votes_at(x, y) == 0 {
                     continue;
                 }
                 let s = sum3(x, y);
-                if s < floor {
-                    continue;
+                if s >= floor {
+                    sums[y * w + x] = s;
                 }
-                found.push((x, y, s));
             }
         }
         // Each kept peak rules out at most the cells of its box, so the
@@ -429,7 +430,7 @@ impl EdgeVoter {
         // earlier in raster order first among equals): only those are
         // scanned below.
         let box_cells = (2 * PEAK_SEPARATION + 1).pow(2) as usize;
-        strongest_in_raster_order(&mut found, box_cells * max_peaks + 1);
+        let found = strongest_in_raster_order(&sums, w, box_cells * max_peaks + 1);
         // Greedy: the strongest (the first in raster order among equals)
         // not near a kept one, until `max_peaks`. A scan per peak, not a
         // sort of every candidate: `max_peaks` is a handful.
@@ -547,26 +548,31 @@ fn on_rim(c: [f64; 2], r: f64, ([x, y], [gx, gy]): ([i32; 2], [f32; 2])) -> bool
     (d - r).abs() <= RIM_BINS_PX && dx * f64::from(gx) + dy * f64::from(gy) >= RADIAL_COS * d
 }
 
-/// Keeps the `n` cells (x, y, votes) of `found` (in raster order) with the
-/// most votes, the earlier first among equals, in raster order: the votes'
-/// cutoff from a count of each value (linear; a partial sort of the tens of
-/// thousands of voted cells was a tenth of the edge source's work).
-fn strongest_in_raster_order(found: &mut Vec<(usize, usize, u32)>, n: usize) {
-    if found.len() <= n {
-        return;
+/// The `n` cells (x, y, sum) of `sums` (a frame `w` wide; 0 where no
+/// candidate) with the largest sums, the earlier in raster order first
+/// among equals, in raster order: the sums' cutoff from a count of each
+/// value (linear; a partial sort of the tens of thousands of voted cells
+/// was a tenth of the edge source's work, and a list of them all a
+/// twentieth).
+fn strongest_in_raster_order(sums: &[u32], w: usize, n: usize) -> Vec<(usize, usize, u32)> {
+    let cell = |i: usize, s: u32| (i % w, i / w, s);
+    let candidates = sums.iter().filter(|&&s| s > 0);
+    let (count, high) = candidates.fold((0usize, 0u32), |(c, hi), &s| (c + 1, hi.max(s)));
+    if count <= n {
+        return (sums.iter().enumerate())
+            .filter(|(_, s)| **s > 0)
+            .map(|(i, &s)| cell(i, s))
+            .collect();
     }
-    let (low, high) = found
-        .iter()
-        .fold((u32::MAX, 0), |(lo, hi), p| (lo.min(p.2), hi.max(p.2)));
-    let mut counts = vec![0usize; (high - low) as usize + 1];
-    for p in found.iter() {
-        counts[(p.2 - low) as usize] += 1;
+    let mut counts = vec![0usize; high as usize + 1];
+    for &s in sums {
+        counts[s as usize] += 1;
     }
     // The cutoff: the value at which the strongest first reach `n`.
     let mut above = 0;
-    let mut cutoff = low;
-    for v in (low..=high).rev() {
-        let c = counts[(v - low) as usize];
+    let mut cutoff = 1;
+    for v in (1..=high).rev() {
+        let c = counts[v as usize];
         if above + c >= n {
             cutoff = v;
             break;
@@ -574,11 +580,15 @@ fn strongest_in_raster_order(found: &mut Vec<(usize, usize, u32)>, n: usize) {
         above += c;
     }
     let mut ties = n - above;
-    found.retain(|p| {
-        let tie = p.2 == cutoff && ties > 0;
+    let mut kept = Vec::with_capacity(n);
+    for (i, &s) in sums.iter().enumerate() {
+        let tie = s == cutoff && ties > 0;
         ties -= usize::from(tie);
-        p.2 > cutoff || tie
-    });
+        if s > cutoff || tie {
+            kept.push(cell(i, s));
+        }
+    }
+    kept
 }
 
 #[cfg(test)]
@@ -749,19 +759,18 @@ mod tests {
 
     #[test]
     fn the_strongest_cells_are_kept_in_raster_order_earlier_first_among_equals() {
-        let mut found = vec![
-            (0, 0, 5),
-            (1, 0, 9),
-            (2, 0, 7),
-            (0, 1, 7),
-            (1, 1, 7),
-            (2, 1, 1),
-        ];
-        strongest_in_raster_order(&mut found, 3);
-        assert_eq!(found, vec![(1, 0, 9), (2, 0, 7), (0, 1, 7)]);
-        let mut few = vec![(0, 0, 1)];
-        strongest_in_raster_order(&mut few, 3);
-        assert_eq!(few, vec![(0, 0, 1)]);
+        // A frame 3 wide, two rows; 0 is no candidate.
+        let sums = [5, 9, 7, 7, 7, 1, 0, 0, 0];
+        assert_eq!(
+            strongest_in_raster_order(&sums, 3, 3),
+            vec![(1, 0, 9), (2, 0, 7), (0, 1, 7)]
+        );
+        assert_eq!(
+            strongest_in_raster_order(&sums, 3, 5),
+            vec![(0, 0, 5), (1, 0, 9), (2, 0, 7), (0, 1, 7), (1, 1, 7)]
+        );
+        let few = [0, 1, 0];
+        assert_eq!(strongest_in_raster_order(&few, 3, 3), vec![(1, 0, 1)]);
     }
 
     #[test]
