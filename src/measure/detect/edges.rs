@@ -508,7 +508,7 @@ fn cast_votes(
 ) {
     // The padded cell of a coordinate: rounding half away from zero, as
     // `f32::round`, without its libm call; at or below -0.5 the padding's
-    // first cell (`max` and a comparison, not a branch: the same cell).
+    // first cell (a clamp and a comparison, not a branch: the same cell).
     let cell = |v: f32| {
         let t = v + 0.5;
         // SAFETY: clamped to [0, 2^23], finite and within `i32`: the
@@ -657,6 +657,17 @@ mod tests {
         };
         voter.vote(w, h, r_min, r_max);
         assert_eq!(voter.votes, votes_one_by_one(w, h, &edges, r_min, r_max));
+    }
+
+    /// A configuration whose farthest range makes the smallest disc larger
+    /// than the votes reach (`max_range_m` 0.7 at a focal length of 1280
+    /// px: 274 px) votes at that radius alone: the radii's bounds once
+    /// crossed, and `clamp` panicked.
+    #[test]
+    fn a_smallest_disc_beyond_the_votes_reach_is_voted_for_without_panic() {
+        let circles = EdgeVoter::default().find(&scene(false), 12.0, 274.0, 480.0, 3);
+        // The one radius voted for: 68 decimated pixels (by 4).
+        assert!(circles.iter().all(|c| c.radius_px == 272.0), "{circles:?}");
     }
 
     #[test]
