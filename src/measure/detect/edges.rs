@@ -487,10 +487,14 @@ impl EdgeVoter {
     }
 }
 
-/// Above any cell of the padded frame (a frame of 2^23 pixels a side is
-/// none this runs on), and below where `f32` stops counting every integer:
-/// a coordinate clamped to it converts to `i32` exactly.
+/// Below where `f32` stops counting every integer (2^23), so that a
+/// coordinate clamped to it converts to `i32` exactly, and above any cell
+/// of the padded frame: frames are at most
+/// [`MAX_SIDE_PX`](crate::camera::MAX_SIDE_PX) a side (the assertion
+/// below holds it at compile time).
 const CELL_LIMIT: f32 = 8_388_608.0;
+const _: () =
+    assert!((crate::camera::MAX_SIDE_PX as usize + 2 * MAX_VOTE_RADIUS + 4) < CELL_LIMIT as usize);
 
 /// One edge's votes for the centres `r_min..=r_max` pixels against its
 /// gradient, in the padded frame of [`EdgeVoter::vote`]: added, or taken
@@ -511,9 +515,10 @@ fn cast_votes(
     // first cell (a clamp and a comparison, not a branch: the same cell).
     let cell = |v: f32| {
         let t = v + 0.5;
-        // SAFETY: clamped to [0, 2^23], finite and within `i32`: the
-        // unchecked conversion is exact, as `as` would be, and converts
-        // four lanes at once where `as` (saturating) goes one by one.
+        // SAFETY: clamped to [0, CELL_LIMIT], finite and within `i32`:
+        // the unchecked conversion is exact, as `as` would be, and
+        // converts four lanes at once where `as` (saturating) goes one by
+        // one. The clamp's upper end is never reached (CELL_LIMIT).
         let whole: i32 = unsafe { t.clamp(0.0, CELL_LIMIT).to_int_unchecked() };
         whole + i32::from(t > 0.0)
     };
