@@ -27,8 +27,18 @@ use crate::measure::ellipse::Ellipse;
 use crate::measure::pose::{CirclePose, circle_plane_basis, cone_pose};
 use image::GrayImage;
 
-/// Points along the predicted rim (every 7.5 degrees of the circle).
-const SAMPLES: usize = 48;
+/// Points along the predicted rim (every 7.5 degrees of the circle) when
+/// candidates are compared and on a tracked frame.
+pub const SAMPLES: usize = 48;
+/// Points along the predicted rim on the full-frame search's deciding pass
+/// (the chosen candidate's full-density check), twice [`SAMPLES`]: the
+/// points in between as well. A drogue's share sits near
+/// `min_canopy_fraction` where haze, glare or the probe take part of its
+/// rim, and 48 points judge a share of 0.5 with a binomial standard
+/// deviation of 0.07, so the verdict on such a candidate followed where its
+/// points happened to fall. The deciding pass runs once a frame, on the
+/// candidate that would be the answer.
+pub const DECIDING_SAMPLES: usize = 2 * SAMPLES;
 /// Half-width of the search across the predicted rim: this share of its
 /// radius in pixels, at least [`MIN_SEARCH_PX`].
 const SEARCH_RADII: f64 = 0.1;
@@ -64,7 +74,8 @@ const NOISE_BRIGHTENING_SIGMAS: f32 = 2.0;
 const STEP_PX: f64 = 0.5;
 /// Gray level from which a sample counts as saturated.
 /// Fewest rim points in the image (and not saturated) for a pose's rim to
-/// be judged.
+/// be judged, of [`SAMPLES`]: a quarter of the rim (the same arc at any
+/// other count of points, [`min_judged`]).
 const MIN_JUDGED: usize = 12;
 /// Fewest background samples beyond the predicted rim for the
 /// polarity-free test ([`outer_edge_offset`]).
@@ -176,11 +187,23 @@ pub(crate) fn nearest<T>(by_angle: &[(f64, T)], angle: f64) -> Option<&(f64, T)>
     })
 }
 
+/// Fewest judged points of `samples` for a pose's rim to be judged: as
+/// many as the shortest arc that holds [`MIN_JUDGED`] of [`SAMPLES`] points
+/// (`MIN_JUDGED - 1` gaps of a [`SAMPLES`]th of the turn) holds of
+/// `samples` evenly spaced points, so that a denser read judges the same
+/// arcs of rim, not fewer (a quarter of 96 points, 24, would refuse an arc
+/// in the frame that 12 of 48 points judge).
+fn min_judged(samples: usize) -> usize {
+    (MIN_JUDGED - 1) * samples / SAMPLES + 1
+}
+
 /// The canopy evidence of a candidate: the larger of its two poses'
 /// shares of judged rim points with an outward brightening of at least
-/// `edge.min_step_gray` near the predicted rim. `None` when neither pose can
-/// be judged (degenerate ellipse, fewer than `MIN_JUDGED` points in the
-/// image). The second pose is read only as far as it could still show
+/// `edge.min_step_gray` near the predicted rim, read at `samples` points
+/// evenly round each rim ([`SAMPLES`], or [`DECIDING_SAMPLES`] on the
+/// deciding pass). `None` when neither pose can be judged (degenerate
+/// ellipse, less than about a quarter of the rim in the image,
+/// [`min_judged`]). The second pose is read only as far as it could still show
 /// more than the first: its points cost two profiles each, and once it
 /// cannot win (a clear canopy shows on every point of the first) the
 /// larger share is known.
@@ -200,6 +223,7 @@ pub fn ring_support(
     drogue: DrogueCircles,
     edge: RimEdge,
     fails_below: Option<f64>,
+    samples: usize,
     profile: &mut Vec<f32>,
     scratch: &mut Vec<f32>,
 ) -> Option<f64> {
@@ -209,9 +233,10 @@ pub fn ring_support(
         let reading = Reading {
             to_beat: best,
             fails_below,
+            samples,
         };
         let share = pose_ring(image, camera, pose, drogue, edge, reading, profile, scratch);
-        if let Some(share) = share.filter(|s| s.judged >= MIN_JUDGED)
+        if let Some(share) = share.filter(|s| s.judged >= min_judged(samples))
             && best.is_none_or(|b| share.exceeds(b))
         {
             best = Some(share);
@@ -240,19 +265,20 @@ impl Share {
     }
 }
 
-/// How far a pose's ring is read: while its share could still exceed
-/// `to_beat`'s, and reach `fails_below` ([`ring_support`]).
+/// How a pose's ring is read: at `samples` points, while its share could
+/// still exceed `to_beat`'s and reach `fails_below` ([`ring_support`]).
 #[derive(Clone, Copy)]
 struct Reading {
     to_beat: Option<Share>,
     fails_below: Option<f64>,
+    samples: usize,
 }
 
 /// (judged, with an edge) along the canopy rim that `pose` predicts;
 /// `None` as soon as the points left could no longer make the share
 /// larger than `reading.to_beat`'s, had every one of them an edge; the
 /// share so far as soon as they could no longer lift it to
-/// `reading.fails_below` (once [`MIN_JUDGED`] points are judged).
+/// `reading.fails_below` (once enough points are judged, [`min_judged`]).
 #[allow(clippy::too_many_arguments)]
 fn pose_ring(
     image: &GrayImage,
@@ -270,8 +296,9 @@ fn pose_ring(
     let centre = camera.project_px(&pose.centre_camera_m)?;
     let inner_radius_m = drogue.inner_radius_m;
     let (mut judged, mut seen) = (0, 0);
-    for k in 0..SAMPLES {
-        let left = SAMPLES - k;
+    let samples = reading.samples;
+    for k in 0..samples {
+        let left = samples - k;
         // The most the share could still be: every point left judged and
         // with an edge.
         let most = Share {
@@ -281,10 +308,11 @@ fn pose_ring(
         if reading.to_beat.is_some_and(|b| !most.exceeds(b)) {
             return None;
         }
-        if judged >= MIN_JUDGED && reading.fails_below.is_some_and(|f| most.fraction() < f) {
+        if judged >= min_judged(samples) && reading.fails_below.is_some_and(|f| most.fraction() < f)
+        {
             return Some(Share { judged, seen });
         }
-        let t = std::f64::consts::TAU * k as f64 / SAMPLES as f64;
+        let t = std::f64::consts::TAU * k as f64 / samples as f64;
         let radial = t.cos() * e1 + t.sin() * e2;
         let Some((p, d)) = camera.project_px_with_derivative(
             &(pose.centre_camera_m + canopy_radius_m * radial),
@@ -582,6 +610,16 @@ mod tests {
 
     /// The canopy evidence of `ellipse` on `image` through [`camera`].
     fn support(image: &GrayImage, ellipse: &Ellipse, edge: RimEdge) -> Option<f64> {
+        support_at(image, ellipse, edge, SAMPLES)
+    }
+
+    /// [`support`] read at `samples` points round each rim.
+    fn support_at(
+        image: &GrayImage,
+        ellipse: &Ellipse,
+        edge: RimEdge,
+        samples: usize,
+    ) -> Option<f64> {
         ring_support(
             image,
             &camera(),
@@ -589,6 +627,7 @@ mod tests {
             DROGUE,
             edge,
             None,
+            samples,
             &mut Vec::new(),
             &mut Vec::new(),
         )
@@ -708,6 +747,7 @@ mod tests {
                     DROGUE,
                     EDGE,
                     Some(needed),
+                    SAMPLES,
                     &mut Vec::new(),
                     &mut Vec::new(),
                 );
@@ -796,6 +836,87 @@ mod tests {
         }
     }
 
+    /// Any arc of the rim (in the frame, not saturated) that 12 of 48
+    /// points judge is judged by the 96-point read too, wherever the
+    /// points fall on it, and 23 is the most the denser read may ask: some
+    /// arc holding 22 of its points holds fewer than 12 of the 48.
+    #[test]
+    fn a_denser_read_judges_every_arc_the_comparing_read_judges() {
+        let held = |arc: f64, phase: f64, samples: usize| {
+            (0..samples)
+                .filter(|&k| ((k as f64 + phase) / samples as f64).rem_euclid(1.0) < arc)
+                .count()
+        };
+        let mut tightest = false;
+        for a in 0..=1000 {
+            let arc = f64::from(a) / 1000.0;
+            for p in 0..20 {
+                let phase = f64::from(p) / 20.0;
+                // The two reads' points as `pose_ring` places them: the
+                // 48 are every other one of the 96.
+                let (coarse, dense) = (held(arc, phase, SAMPLES), held(arc, 2.0 * phase, 96));
+                if coarse >= MIN_JUDGED {
+                    assert!(dense >= min_judged(96), "{arc} {phase}: {coarse} {dense}");
+                }
+                tightest |= dense == min_judged(96) - 1 && coarse < MIN_JUDGED;
+            }
+        }
+        assert!(tightest);
+        assert_eq!(min_judged(SAMPLES), MIN_JUDGED);
+        assert_eq!(min_judged(DECIDING_SAMPLES), 23);
+    }
+
+    /// Read at twice the points (the deciding pass), the ring's points in
+    /// between are read too, not the same points again: on a drogue whose
+    /// canopy shows over a share of the turn, each read's share is that
+    /// share to within about one of its own points (a point at either end
+    /// of the arc may go either way), and the deciding read's count of
+    /// points with an edge is not always twice the comparing read's, as
+    /// two reads of the same 48 points would make it.
+    #[test]
+    fn the_deciding_read_takes_the_points_in_between() {
+        let read = |image: &GrayImage, samples: usize| {
+            let poses = cone_pose(&disc(), &camera(), DROGUE.inner_radius_m).unwrap();
+            pose_ring(
+                image,
+                &camera(),
+                &poses[0],
+                DROGUE,
+                EDGE,
+                Reading {
+                    to_beat: None,
+                    fails_below: None,
+                    samples,
+                },
+                &mut Vec::new(),
+                &mut Vec::new(),
+            )
+            .unwrap()
+        };
+        let whole = read(&render(true), DECIDING_SAMPLES);
+        assert_eq!(
+            (whole.judged, whole.seen),
+            (DECIDING_SAMPLES, DECIDING_SAMPLES)
+        );
+        let mut not_twice = 0;
+        for shown in [0.3, 0.41, 0.47, 0.52, 0.58, 0.66] {
+            let image = render_partly(shown);
+            let (comparing, deciding) = (read(&image, SAMPLES), read(&image, DECIDING_SAMPLES));
+            assert_eq!(
+                (comparing.judged, deciding.judged),
+                (SAMPLES, DECIDING_SAMPLES)
+            );
+            for (share, points) in [(comparing, SAMPLES), (deciding, DECIDING_SAMPLES)] {
+                assert!(
+                    (share.fraction() - shown).abs() <= 1.5 / points as f64,
+                    "{shown}: {share:?}"
+                );
+            }
+            not_twice += usize::from(deciding.seen != 2 * comparing.seen);
+        }
+        assert!(not_twice >= 2, "{not_twice}");
+    }
+
     /// The second pose, read only while it could still show more than the
     /// first, gives the share both poses read whole give: on ellipses of
     /// the drogue, tilted and not, beside it and inside it, in noise.
@@ -816,11 +937,12 @@ mod tests {
                         Reading {
                             to_beat: None,
                             fails_below: None,
+                            samples: SAMPLES,
                         },
                         &mut profile,
                         &mut scratch,
                     )?;
-                    (s.judged >= MIN_JUDGED).then(|| s.fraction())
+                    (s.judged >= min_judged(SAMPLES)).then(|| s.fraction())
                 })
                 .max_by(f64::total_cmp)
         };

@@ -453,8 +453,9 @@ impl Detector {
     fn search_full(&mut self, image: &GrayImage) -> Option<Verified> {
         let mut verified = self.verify_candidates(image, self.cfg.accept_score);
         // The best candidate that passes again at the full density of rim
-        // points: a candidate that passed on the sparse rim only by the
-        // luck of where its rays fell is not the drogue.
+        // points and of canopy rim points (`RimUse::Decide`): a candidate
+        // that passed on the sparse rim only by the luck of where its rays
+        // fell is not the drogue.
         verified.sort_by(|x, y| y.score.total_cmp(&x.score));
         let measure_spacing = self.cfg.rim_point_spacing_px;
         let verify_spacing = VERIFY_SPACING_PX.max(measure_spacing);
@@ -465,7 +466,7 @@ impl Detector {
                 &scouted.ellipse,
                 verify_spacing,
                 max_points,
-                RimUse::Measure,
+                RimUse::Decide,
             ) {
                 Ok(full) => Some(full),
                 Err(why) => {
