@@ -27,18 +27,21 @@ use crate::measure::ellipse::Ellipse;
 use crate::measure::pose::{CirclePose, circle_plane_basis, cone_pose};
 use image::GrayImage;
 
-/// Points along the predicted rim (every 7.5 degrees of the circle) when
-/// candidates are compared and on a tracked frame.
-pub const SAMPLES: usize = 48;
-/// Points along the predicted rim on the full-frame search's deciding pass
-/// (the chosen candidate's full-density check), twice [`SAMPLES`]: the
-/// points in between as well. A drogue's share sits near
-/// `min_canopy_fraction` where haze, glare or the probe take part of its
-/// rim, and 48 points judge a share of 0.5 with a binomial standard
-/// deviation of 0.07, so the verdict on such a candidate followed where its
-/// points happened to fall. The deciding pass runs once a frame, on the
-/// candidate that would be the answer.
-pub const DECIDING_SAMPLES: usize = 2 * SAMPLES;
+/// Points along the predicted rim (every 7.5 degrees of the circle); the
+/// points half-way between them too where the share is in doubt
+/// ([`DOUBT_SIGMAS`]).
+const SAMPLES: usize = 48;
+/// Where the canopy is required, a pose's share of [`SAMPLES`] points
+/// within this many binomial standard deviations of the share needed
+/// (`sqrt(f (1 - f) / 48)`: 0.072 at 0.5) is in doubt, and the points
+/// half-way between are read as well: the verdict is that of all 96. A
+/// drogue whose rim haze, glare or the probe partly hide shows a share
+/// near `min_canopy_fraction`, and so do a few shapes without a canopy, so
+/// that the verdict on 48 points followed where they happened to fall. A
+/// share further from the threshold (0.36 or less, 0.64 or more at 0.5)
+/// is a verdict already: read again, it is on the same side at least 97 %
+/// of the time.
+const DOUBT_SIGMAS: f64 = 2.0;
 /// Half-width of the search across the predicted rim: this share of its
 /// radius in pixels, at least [`MIN_SEARCH_PX`].
 const SEARCH_RADII: f64 = 0.1;
@@ -199,22 +202,23 @@ fn min_judged(samples: usize) -> usize {
 
 /// The canopy evidence of a candidate: the larger of its two poses'
 /// shares of judged rim points with an outward brightening of at least
-/// `edge.min_step_gray` near the predicted rim, read at `samples` points
-/// evenly round each rim ([`SAMPLES`], or [`DECIDING_SAMPLES`] on the
-/// deciding pass). `None` when neither pose can be judged (degenerate
-/// ellipse, less than about a quarter of the rim in the image,
-/// [`min_judged`]). The second pose is read only as far as it could still show
-/// more than the first: its points cost two profiles each, and once it
-/// cannot win (a clear canopy shows on every point of the first) the
-/// larger share is known.
+/// `edge.min_step_gray` near the predicted rim, read at [`SAMPLES`] points
+/// evenly round each rim, and at the points half-way between as well
+/// where a share is in doubt against `fails_below` ([`DOUBT_SIGMAS`]).
+/// `None` when neither pose can be judged (degenerate ellipse, less than
+/// about a quarter of the rim in the image, [`min_judged`]). The second
+/// pose is read only as far as it could still show more than the first:
+/// its points cost two profiles each, and once it cannot win (a clear
+/// canopy shows on every point of the first) the larger share is known.
 ///
 /// With `fails_below` (the share a candidate needs), a pose is read only
-/// as far as it could still reach that share: one that cannot gives the
-/// share of the points read (below `fails_below`, as the whole ring's
-/// would be), so that a candidate without a canopy, most of those a
-/// drogue-free frame verifies, costs about half the reads. Whether the
-/// result is below `fails_below`, and any result at or above it, are
-/// those of reading every point.
+/// as far as it could still reach that share (or, on the first 48 points,
+/// the lower end of the doubt): one that cannot gives the share of the
+/// points read (below `fails_below`, as the whole ring's would be), so
+/// that a candidate without a canopy, most of those a drogue-free frame
+/// verifies, costs about half the reads. Whether the result is below
+/// `fails_below`, and any result at or above it, are those of reading
+/// every point.
 #[allow(clippy::too_many_arguments)]
 pub fn ring_support(
     image: &GrayImage,
@@ -223,20 +227,35 @@ pub fn ring_support(
     drogue: DrogueCircles,
     edge: RimEdge,
     fails_below: Option<f64>,
-    samples: usize,
     profile: &mut Vec<f32>,
     scratch: &mut Vec<f32>,
 ) -> Option<f64> {
     let poses = cone_pose(ellipse, camera, drogue.inner_radius_m)?;
+    // The doubt about a share of 48 points against the share needed.
+    let doubt = fails_below.map(|f| {
+        let f = f.clamp(0.0, 1.0);
+        DOUBT_SIGMAS * (f * (1.0 - f) / SAMPLES as f64).sqrt()
+    });
     let mut best: Option<Share> = None;
     for pose in &poses {
-        let reading = Reading {
+        let first = Reading {
             to_beat: best,
-            fails_below,
-            samples,
+            fails_below: fails_below.zip(doubt).map(|(f, d)| f - d),
+            after: None,
         };
-        let share = pose_ring(image, camera, pose, drogue, edge, reading, profile, scratch);
-        if let Some(share) = share.filter(|s| s.judged >= min_judged(samples))
+        let mut share = pose_ring(image, camera, pose, drogue, edge, first, profile, scratch);
+        if let (Some(f), Some(d), Some(s)) = (fails_below, doubt, share)
+            && s.judged >= min_judged(SAMPLES)
+            && (s.fraction() - f).abs() < d
+        {
+            let between = Reading {
+                to_beat: best,
+                fails_below,
+                after: Some(s),
+            };
+            share = pose_ring(image, camera, pose, drogue, edge, between, profile, scratch);
+        }
+        if let Some(share) = share.filter(|s| s.judged >= min_judged(s.read))
             && best.is_none_or(|b| share.exceeds(b))
         {
             best = Some(share);
@@ -246,11 +265,12 @@ pub fn ring_support(
 }
 
 /// Rim points judged along a pose's predicted canopy rim, and those with
-/// an edge.
+/// an edge, of the points `read` round it ([`SAMPLES`], or twice that).
 #[derive(Clone, Copy, Debug)]
 struct Share {
     judged: usize,
     seen: usize,
+    read: usize,
 }
 
 impl Share {
@@ -265,19 +285,22 @@ impl Share {
     }
 }
 
-/// How a pose's ring is read: at `samples` points, while its share could
-/// still exceed `to_beat`'s and reach `fails_below` ([`ring_support`]).
+/// How far a pose's ring is read: while its share could still exceed
+/// `to_beat`'s, and reach `fails_below` ([`ring_support`]); `after`, the
+/// share of its [`SAMPLES`] points already read, when these are the
+/// points half-way between them.
 #[derive(Clone, Copy)]
 struct Reading {
     to_beat: Option<Share>,
     fails_below: Option<f64>,
-    samples: usize,
+    after: Option<Share>,
 }
 
-/// (judged, with an edge) along the canopy rim that `pose` predicts;
-/// `None` as soon as the points left could no longer make the share
-/// larger than `reading.to_beat`'s, had every one of them an edge; the
-/// share so far as soon as they could no longer lift it to
+/// (judged, with an edge) along the canopy rim that `pose` predicts, at
+/// [`SAMPLES`] points (added to `reading.after`'s, half a step on from
+/// them, when given); `None` as soon as the points left could no longer
+/// make the share larger than `reading.to_beat`'s, had every one of them
+/// an edge; the share so far as soon as they could no longer lift it to
 /// `reading.fails_below` (once enough points are judged, [`min_judged`]).
 #[allow(clippy::too_many_arguments)]
 fn pose_ring(
@@ -295,24 +318,27 @@ fn pose_ring(
     // The rim's radius in pixels, for the width of the search.
     let centre = camera.project_px(&pose.centre_camera_m)?;
     let inner_radius_m = drogue.inner_radius_m;
-    let (mut judged, mut seen) = (0, 0);
-    let samples = reading.samples;
-    for k in 0..samples {
-        let left = samples - k;
+    let (mut judged, mut seen) = reading.after.map_or((0, 0), |a| (a.judged, a.seen));
+    let (read, phase) = match reading.after {
+        Some(_) => (2 * SAMPLES, 0.5),
+        None => (SAMPLES, 0.0),
+    };
+    for k in 0..SAMPLES {
+        let left = SAMPLES - k;
         // The most the share could still be: every point left judged and
         // with an edge.
         let most = Share {
             judged: judged + left,
             seen: seen + left,
+            read,
         };
         if reading.to_beat.is_some_and(|b| !most.exceeds(b)) {
             return None;
         }
-        if judged >= min_judged(samples) && reading.fails_below.is_some_and(|f| most.fraction() < f)
-        {
-            return Some(Share { judged, seen });
+        if judged >= min_judged(read) && reading.fails_below.is_some_and(|f| most.fraction() < f) {
+            return Some(Share { judged, seen, read });
         }
-        let t = std::f64::consts::TAU * k as f64 / samples as f64;
+        let t = std::f64::consts::TAU * (k as f64 + phase) / SAMPLES as f64;
         let radial = t.cos() * e1 + t.sin() * e2;
         let Some((p, d)) = camera.project_px_with_derivative(
             &(pose.centre_camera_m + canopy_radius_m * radial),
@@ -417,7 +443,7 @@ fn pose_ring(
             seen += 1;
         }
     }
-    Some(Share { judged, seen })
+    Some(Share { judged, seen, read })
 }
 
 /// Whether the canopy between the disc and its outer rim, along the 3-D
@@ -610,16 +636,6 @@ mod tests {
 
     /// The canopy evidence of `ellipse` on `image` through [`camera`].
     fn support(image: &GrayImage, ellipse: &Ellipse, edge: RimEdge) -> Option<f64> {
-        support_at(image, ellipse, edge, SAMPLES)
-    }
-
-    /// [`support`] read at `samples` points round each rim.
-    fn support_at(
-        image: &GrayImage,
-        ellipse: &Ellipse,
-        edge: RimEdge,
-        samples: usize,
-    ) -> Option<f64> {
         ring_support(
             image,
             &camera(),
@@ -627,10 +643,36 @@ mod tests {
             DROGUE,
             edge,
             None,
-            samples,
             &mut Vec::new(),
             &mut Vec::new(),
         )
+    }
+
+    /// One pose's rim of `ellipse` read whole: at [`SAMPLES`] points, and
+    /// with `between` the points half-way between as well.
+    fn read_whole(image: &GrayImage, ellipse: &Ellipse, pose: usize, between: bool) -> Share {
+        let poses = cone_pose(ellipse, &camera(), DROGUE.inner_radius_m).unwrap();
+        let read = |after: Option<Share>| {
+            let reading = Reading {
+                to_beat: None,
+                fails_below: None,
+                after,
+            };
+            let (mut profile, mut scratch) = (Vec::new(), Vec::new());
+            pose_ring(
+                image,
+                &camera(),
+                &poses[pose],
+                DROGUE,
+                EDGE,
+                reading,
+                &mut profile,
+                &mut scratch,
+            )
+            .unwrap()
+        };
+        let first = read(None);
+        if between { read(Some(first)) } else { first }
     }
 
     fn disc() -> Ellipse {
@@ -730,6 +772,29 @@ mod tests {
         })
     }
 
+    /// The share [`ring_support`] gives with `needed`, every point of its
+    /// reading plan read: each pose's 48 points, and the 96 where the 48's
+    /// share is in doubt; the larger of the poses that can be judged.
+    fn planned_whole(image: &GrayImage, ellipse: &Ellipse, needed: f64) -> Option<f64> {
+        let doubt = DOUBT_SIGMAS * (needed * (1.0 - needed) / SAMPLES as f64).sqrt();
+        (0..2)
+            .map(|pose| {
+                let first = read_whole(image, ellipse, pose, false);
+                if (first.fraction() - needed).abs() < doubt {
+                    read_whole(image, ellipse, pose, true)
+                } else {
+                    first
+                }
+            })
+            .filter(|s| s.judged >= min_judged(s.read))
+            .map(Share::fraction)
+            .max_by(f64::total_cmp)
+    }
+
+    /// Read only while it could pass (and, on its first 48 points, while it
+    /// could reach the doubt's lower end), a ring gives the verdict of its
+    /// plan read whole ([`planned_whole`]), and any share at or above the
+    /// one needed exactly.
     #[test]
     fn a_ring_read_only_while_it_could_pass_gives_the_whole_rings_verdict() {
         let needed = 0.5;
@@ -739,7 +804,7 @@ mod tests {
                 render_partly(shown),
                 with_noise(&render_partly(shown), 8.0, 3),
             ] {
-                let whole = support(&image, &disc(), EDGE);
+                let whole = planned_whole(&image, &disc(), needed);
                 let limited = ring_support(
                     &image,
                     &camera(),
@@ -747,7 +812,6 @@ mod tests {
                     DROGUE,
                     EDGE,
                     Some(needed),
-                    SAMPLES,
                     &mut Vec::new(),
                     &mut Vec::new(),
                 );
@@ -837,7 +901,7 @@ mod tests {
     }
 
     /// Any arc of the rim (in the frame, not saturated) that 12 of 48
-    /// points judge is judged by the 96-point read too, wherever the
+    /// points judge is judged by 96 points too, wherever the
     /// points fall on it, and 23 is the most the denser read may ask: some
     /// arc holding 22 of its points holds fewer than 12 of the 48.
     #[test]
@@ -863,58 +927,83 @@ mod tests {
         }
         assert!(tightest);
         assert_eq!(min_judged(SAMPLES), MIN_JUDGED);
-        assert_eq!(min_judged(DECIDING_SAMPLES), 23);
+        assert_eq!(min_judged(2 * SAMPLES), 23);
     }
 
-    /// Read at twice the points (the deciding pass), the ring's points in
-    /// between are read too, not the same points again: on a drogue whose
-    /// canopy shows over a share of the turn, each read's share is that
-    /// share to within about one of its own points (a point at either end
-    /// of the arc may go either way), and the deciding read's count of
-    /// points with an edge is not always twice the comparing read's, as
+    /// The points half-way between are other points, not the same ones
+    /// read again: on a drogue whose canopy shows over a share of the
+    /// turn, each read's share is that share to within about one of its
+    /// own points (a point at either end of the arc may go either way), and
+    /// the 96 points' count with an edge is not always twice the 48's, as
     /// two reads of the same 48 points would make it.
     #[test]
-    fn the_deciding_read_takes_the_points_in_between() {
-        let read = |image: &GrayImage, samples: usize| {
-            let poses = cone_pose(&disc(), &camera(), DROGUE.inner_radius_m).unwrap();
-            pose_ring(
-                image,
-                &camera(),
-                &poses[0],
-                DROGUE,
-                EDGE,
-                Reading {
-                    to_beat: None,
-                    fails_below: None,
-                    samples,
-                },
-                &mut Vec::new(),
-                &mut Vec::new(),
-            )
-            .unwrap()
-        };
-        let whole = read(&render(true), DECIDING_SAMPLES);
+    fn the_points_in_between_are_the_rims_other_points() {
+        let whole = read_whole(&render(true), &disc(), 0, true);
         assert_eq!(
-            (whole.judged, whole.seen),
-            (DECIDING_SAMPLES, DECIDING_SAMPLES)
+            (whole.judged, whole.seen, whole.read),
+            (2 * SAMPLES, 2 * SAMPLES, 2 * SAMPLES)
         );
         let mut not_twice = 0;
         for shown in [0.3, 0.41, 0.47, 0.52, 0.58, 0.66] {
             let image = render_partly(shown);
-            let (comparing, deciding) = (read(&image, SAMPLES), read(&image, DECIDING_SAMPLES));
-            assert_eq!(
-                (comparing.judged, deciding.judged),
-                (SAMPLES, DECIDING_SAMPLES)
+            let (first, both) = (
+                read_whole(&image, &disc(), 0, false),
+                read_whole(&image, &disc(), 0, true),
             );
-            for (share, points) in [(comparing, SAMPLES), (deciding, DECIDING_SAMPLES)] {
+            assert_eq!((first.judged, both.judged), (SAMPLES, 2 * SAMPLES));
+            for share in [first, both] {
                 assert!(
-                    (share.fraction() - shown).abs() <= 1.5 / points as f64,
+                    (share.fraction() - shown).abs() <= 1.5 / share.read as f64,
                     "{shown}: {share:?}"
                 );
             }
-            not_twice += usize::from(deciding.seen != 2 * comparing.seen);
+            not_twice += usize::from(both.seen != 2 * first.seen);
         }
         assert!(not_twice >= 2, "{not_twice}");
+    }
+
+    /// Where the canopy is required, a share of 48 points in doubt
+    /// (within [`DOUBT_SIGMAS`] of the share needed) is the share of all
+    /// 96 points; one clear of it is the 48 points' share: on canopies
+    /// shown over 0-100 % of the turn, as [`read_whole`] reads them.
+    #[test]
+    fn a_share_in_doubt_is_read_again_between_its_points() {
+        let needed = 0.5;
+        let doubt = DOUBT_SIGMAS * (needed * (1.0 - needed) / SAMPLES as f64).sqrt();
+        let (mut in_doubt, mut clear) = (0, 0);
+        for shown in [0.1, 0.3, 0.4, 0.45, 0.5, 0.55, 0.6, 0.7, 0.9] {
+            let image = render_partly(shown);
+            let given = ring_support(
+                &image,
+                &camera(),
+                &disc(),
+                DROGUE,
+                EDGE,
+                Some(needed),
+                &mut Vec::new(),
+                &mut Vec::new(),
+            )
+            .unwrap();
+            // Face on, the two poses' rims are one.
+            let first = read_whole(&image, &disc(), 0, false);
+            if (first.fraction() - needed).abs() < doubt {
+                in_doubt += 1;
+                let both = read_whole(&image, &disc(), 0, true);
+                if both.fraction() >= needed {
+                    assert_eq!(given, both.fraction(), "{shown}");
+                } else {
+                    assert!(given < needed, "{shown}: {given}");
+                }
+            } else {
+                clear += 1;
+                if first.fraction() >= needed {
+                    assert_eq!(given, first.fraction(), "{shown}");
+                } else {
+                    assert!(given < needed, "{shown}: {given}");
+                }
+            }
+        }
+        assert!(in_doubt >= 3 && clear >= 4, "{in_doubt} {clear}");
     }
 
     /// The second pose, read only while it could still show more than the
@@ -937,12 +1026,12 @@ mod tests {
                         Reading {
                             to_beat: None,
                             fails_below: None,
-                            samples: SAMPLES,
+                            after: None,
                         },
                         &mut profile,
                         &mut scratch,
                     )?;
-                    (s.judged >= min_judged(SAMPLES)).then(|| s.fraction())
+                    (s.judged >= min_judged(s.read)).then(|| s.fraction())
                 })
                 .max_by(f64::total_cmp)
         };

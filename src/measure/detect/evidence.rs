@@ -205,15 +205,8 @@ impl Detector {
     }
 
     /// The evidence score of a rim pass (the canopy's outer rim band beyond
-    /// its inlier edges, read at `ring_samples` points round each pose's
-    /// rim, [`canopy::ring_support`]), and the candidate when it is good
-    /// enough.
-    pub(super) fn score(
-        &mut self,
-        image: &GrayImage,
-        pass: RimPass,
-        ring_samples: usize,
-    ) -> Result<Verified, Reject> {
+    /// its inlier edges), and the candidate when it is good enough.
+    pub(super) fn score(&mut self, image: &GrayImage, pass: RimPass) -> Result<Verified, Reject> {
         let RimPass {
             ellipse,
             centre,
@@ -281,7 +274,6 @@ impl Detector {
             self.drogue,
             edge,
             canopy_required.then_some(self.cfg.min_canopy_fraction),
-            ring_samples,
             &mut self.profile,
             &mut self.scratch,
         );

@@ -453,9 +453,8 @@ impl Detector {
     fn search_full(&mut self, image: &GrayImage) -> Option<Verified> {
         let mut verified = self.verify_candidates(image, self.cfg.accept_score);
         // The best candidate that passes again at the full density of rim
-        // points and of canopy rim points (`RimUse::Decide`): a candidate
-        // that passed on the sparse rim only by the luck of where its rays
-        // fell is not the drogue.
+        // points: a candidate that passed on the sparse rim only by the
+        // luck of where its rays fell is not the drogue.
         verified.sort_by(|x, y| y.score.total_cmp(&x.score));
         let measure_spacing = self.cfg.rim_point_spacing_px;
         let verify_spacing = VERIFY_SPACING_PX.max(measure_spacing);
@@ -466,7 +465,7 @@ impl Detector {
                 &scouted.ellipse,
                 verify_spacing,
                 max_points,
-                RimUse::Decide,
+                RimUse::Measure,
             ) {
                 Ok(full) => Some(full),
                 Err(why) => {

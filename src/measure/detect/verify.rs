@@ -4,8 +4,8 @@
 
 use super::search::Seed;
 use super::{
-    Detector, Reject, SATURATED_GRAY, VEIL_MIN_GRAY, VEIL_SIGMAS, Verified, canopy, conic_fit,
-    median, polar_radius, polar_radius_local, ray_directions, rim, smoothing_half_for_contrast,
+    Detector, Reject, SATURATED_GRAY, VEIL_MIN_GRAY, VEIL_SIGMAS, Verified, conic_fit, median,
+    polar_radius, polar_radius_local, ray_directions, rim, smoothing_half_for_contrast,
     smoothing_half_for_ramp,
 };
 use crate::measure::ellipse::Ellipse;
@@ -100,37 +100,16 @@ pub(super) struct RimPass {
     pub(super) mids: Vec<(f64, f32)>,
 }
 
-/// What a narrow pass's points are for: comparing candidates, measuring
-/// the pose, or deciding the full-frame search. Only the passes measured
-/// from place their points for a faint step's noise and the canopy's
-/// shading (the detection uses the unmoved points either way), so that
-/// the candidates' passes do not pay for it.
+/// What a narrow pass's points are for: comparing candidates, or measuring
+/// the pose. Only the measuring pass places its points for a faint step's
+/// noise and the canopy's shading (the detection uses the unmoved points
+/// either way), so that the candidates' passes do not pay for it.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub(super) enum RimUse {
     /// Scouting and comparing candidates.
     Scout,
-    /// The pass whose points the pose is measured from (a tracked frame).
+    /// The pass whose points the pose is measured from.
     Measure,
-    /// The full-frame search's check of its chosen candidate at the full
-    /// density of rim points, measured from as [`RimUse::Measure`] and
-    /// with the canopy's rim read at twice the points
-    /// ([`canopy::DECIDING_SAMPLES`]): it decides the frame.
-    Decide,
-}
-
-impl RimUse {
-    /// Whether the pose is measured from the pass's points.
-    fn measures(self) -> bool {
-        self != RimUse::Scout
-    }
-
-    /// Points read round each pose's canopy rim.
-    fn ring_samples(self) -> usize {
-        match self {
-            RimUse::Decide => canopy::DECIDING_SAMPLES,
-            RimUse::Scout | RimUse::Measure => canopy::SAMPLES,
-        }
-    }
 }
 
 /// One ray's edge, for placing it on a shaded canopy.
@@ -416,7 +395,7 @@ impl Detector {
         if self.known_rim(known, &pass.ellipse) {
             return Err(Reject::Known);
         }
-        self.score(image, pass, RimUse::Scout.ring_samples())
+        self.score(image, pass)
     }
 
     /// Whether `e` is the rim of a candidate in `known`, or that
@@ -486,7 +465,7 @@ impl Detector {
         rim_use: RimUse,
     ) -> Result<Verified, Reject> {
         let pass = self.settled_pass(image, start, spacing_px, max_points, rim_use)?;
-        self.score(image, pass, rim_use.ring_samples())
+        self.score(image, pass)
     }
 
     /// Rim ray spacing on which candidates are compared, pixels.
@@ -673,7 +652,7 @@ impl Detector {
             points_px = Vec::with_capacity(rays);
             undistorted = Vec::with_capacity(rays);
             // Filled on the measuring pass only.
-            let measuring = if rim_use.measures() { rays } else { 0 };
+            let measuring = if rim_use == RimUse::Measure { rays } else { 0 };
             shading = Vec::with_capacity(measuring);
             measured_base = Vec::with_capacity(measuring);
             contrasts = Vec::with_capacity(rays);
@@ -779,7 +758,7 @@ impl Detector {
                     let p = [centre[0] + e.s * dir[0], centre[1] + e.s * dir[1]];
                     points_px.push(p);
                     undistorted.push(self.camera.undistort_px(p));
-                    if rim_use.measures() {
+                    if rim_use == RimUse::Measure {
                         let (measured, light_slope) =
                             self.measured_edge(&e, half, cap, s0, &mut faint);
                         measured_base.push([
@@ -852,7 +831,7 @@ impl Detector {
             drop_marked(&mut contrasts, &dropped);
             drop_marked(&mut mid_levels, &dropped);
             drop_marked(&mut widths, &dropped);
-            if rim_use.measures() {
+            if rim_use == RimUse::Measure {
                 drop_marked(&mut measured_base, &dropped);
                 drop_marked(&mut shading, &dropped);
             }
@@ -921,12 +900,13 @@ impl Detector {
             return Err(Reject::LightInside(fill));
         }
         let shape = inliers.len() as f64 / rays_in_image as f64;
-        let (measured_px, measured_undistorted) = if rim_use.measures() {
-            let moved = shaded_points(&measured_base, &shading);
-            let undistorted = moved.iter().map(|&p| self.camera.undistort_px(p)).collect();
-            (moved, undistorted)
-        } else {
-            (points_px.clone(), undistorted)
+        let (measured_px, measured_undistorted) = match rim_use {
+            RimUse::Measure => {
+                let moved = shaded_points(&measured_base, &shading);
+                let undistorted = moved.iter().map(|&p| self.camera.undistort_px(p)).collect();
+                (moved, undistorted)
+            }
+            RimUse::Scout => (points_px.clone(), undistorted),
         };
         Ok(RimPass {
             ellipse,
