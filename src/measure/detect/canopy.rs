@@ -200,6 +200,13 @@ fn min_judged(samples: usize) -> usize {
     (MIN_JUDGED - 1) * samples / SAMPLES + 1
 }
 
+/// How far from `needed` a share of [`SAMPLES`] points is in doubt
+/// ([`DOUBT_SIGMAS`] binomial standard deviations at `needed`).
+fn doubt_about(needed: f64) -> f64 {
+    let f = needed.clamp(0.0, 1.0);
+    DOUBT_SIGMAS * (f * (1.0 - f) / SAMPLES as f64).sqrt()
+}
+
 /// The canopy evidence of a candidate: the larger of its two poses'
 /// shares of judged rim points with an outward brightening of at least
 /// `edge.min_step_gray` near the predicted rim, read at [`SAMPLES`] points
@@ -231,11 +238,7 @@ pub fn ring_support(
     scratch: &mut Vec<f32>,
 ) -> Option<f64> {
     let poses = cone_pose(ellipse, camera, drogue.inner_radius_m)?;
-    // The doubt about a share of 48 points against the share needed.
-    let doubt = fails_below.map(|f| {
-        let f = f.clamp(0.0, 1.0);
-        DOUBT_SIGMAS * (f * (1.0 - f) / SAMPLES as f64).sqrt()
-    });
+    let doubt = fails_below.map(doubt_about);
     let mut best: Option<Share> = None;
     for pose in &poses {
         let first = Reading {
@@ -648,6 +651,21 @@ mod tests {
         )
     }
 
+    /// The canopy evidence of [`disc`] on `image` where a share of
+    /// `needed` is required.
+    fn support_needing(image: &GrayImage, needed: f64) -> Option<f64> {
+        ring_support(
+            image,
+            &camera(),
+            &disc(),
+            DROGUE,
+            EDGE,
+            Some(needed),
+            &mut Vec::new(),
+            &mut Vec::new(),
+        )
+    }
+
     /// One pose's rim of `ellipse` read whole: at [`SAMPLES`] points, and
     /// with `between` the points half-way between as well.
     fn read_whole(image: &GrayImage, ellipse: &Ellipse, pose: usize, between: bool) -> Share {
@@ -776,7 +794,7 @@ mod tests {
     /// reading plan read: each pose's 48 points, and the 96 where the 48's
     /// share is in doubt; the larger of the poses that can be judged.
     fn planned_whole(image: &GrayImage, ellipse: &Ellipse, needed: f64) -> Option<f64> {
-        let doubt = DOUBT_SIGMAS * (needed * (1.0 - needed) / SAMPLES as f64).sqrt();
+        let doubt = doubt_about(needed);
         (0..2)
             .map(|pose| {
                 let first = read_whole(image, ellipse, pose, false);
@@ -805,16 +823,7 @@ mod tests {
                 with_noise(&render_partly(shown), 8.0, 3),
             ] {
                 let whole = planned_whole(&image, &disc(), needed);
-                let limited = ring_support(
-                    &image,
-                    &camera(),
-                    &disc(),
-                    DROGUE,
-                    EDGE,
-                    Some(needed),
-                    &mut Vec::new(),
-                    &mut Vec::new(),
-                );
+                let limited = support_needing(&image, needed);
                 match whole {
                     Some(w) if w >= needed => assert_eq!(limited, whole, "{shown}"),
                     Some(_) => assert!(limited.is_some_and(|l| l < needed), "{shown}: {limited:?}"),
@@ -969,21 +978,11 @@ mod tests {
     #[test]
     fn a_share_in_doubt_is_read_again_between_its_points() {
         let needed = 0.5;
-        let doubt = DOUBT_SIGMAS * (needed * (1.0 - needed) / SAMPLES as f64).sqrt();
+        let doubt = doubt_about(needed);
         let (mut in_doubt, mut clear) = (0, 0);
         for shown in [0.1, 0.3, 0.4, 0.45, 0.5, 0.55, 0.6, 0.7, 0.9] {
             let image = render_partly(shown);
-            let given = ring_support(
-                &image,
-                &camera(),
-                &disc(),
-                DROGUE,
-                EDGE,
-                Some(needed),
-                &mut Vec::new(),
-                &mut Vec::new(),
-            )
-            .unwrap();
+            let given = support_needing(&image, needed).unwrap();
             // Face on, the two poses' rims are one.
             let first = read_whole(&image, &disc(), 0, false);
             if (first.fraction() - needed).abs() < doubt {
