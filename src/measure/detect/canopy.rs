@@ -238,18 +238,17 @@ pub fn ring_support(
     scratch: &mut Vec<f32>,
 ) -> Option<f64> {
     let poses = cone_pose(ellipse, camera, drogue.inner_radius_m)?;
-    let doubt = fails_below.map(doubt_about);
     let mut best: Option<Share> = None;
     for pose in &poses {
         let first = Reading {
             to_beat: best,
-            fails_below: fails_below.zip(doubt).map(|(f, d)| f - d),
+            fails_below: fails_below.map(|f| f - doubt_about(f)),
             after: None,
         };
         let mut share = pose_ring(image, camera, pose, drogue, edge, first, profile, scratch);
-        if let (Some(f), Some(d), Some(s)) = (fails_below, doubt, share)
+        if let (Some(f), Some(s)) = (fails_below, share)
             && s.judged >= min_judged(SAMPLES)
-            && (s.fraction() - f).abs() < d
+            && (s.fraction() - f).abs() < doubt_about(f)
         {
             let between = Reading {
                 to_beat: best,

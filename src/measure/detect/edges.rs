@@ -290,10 +290,12 @@ impl EdgeVoter {
         let (w, h) = (img.width, img.height);
         // The squared magnitude is a whole number (below 2^22): at least
         // the threshold is at least its ceiling. A threshold beyond `i32`
-        // (or NaN) makes no edges, as the comparison in `f64` would.
+        // (or NaN) makes no edges, as the comparison in `f64` would. A
+        // pixel without a gradient has no direction and is never an edge,
+        // whatever the threshold (`min_contrast_gray` may be 0).
         let min2 = (min_gradient * 8.0).powi(2).ceil();
         let min2 = if min2 <= f64::from(i32::MAX) {
-            min2.max(0.0) as i32
+            min2.max(1.0) as i32
         } else {
             i32::MAX
         };
@@ -515,11 +517,14 @@ fn cast_votes(
     // first cell (a clamp and a comparison, not a branch: the same cell).
     let cell = |v: f32| {
         let t = v + 0.5;
-        // SAFETY: clamped to [0, CELL_LIMIT], finite and within `i32`:
-        // the unchecked conversion is exact, as `as` would be, and
-        // converts four lanes at once where `as` (saturating) goes one by
-        // one. The clamp's upper end is never reached (CELL_LIMIT).
-        let whole: i32 = unsafe { t.clamp(0.0, CELL_LIMIT).to_int_unchecked() };
+        // SAFETY: `max` then `min` keep it in [0, CELL_LIMIT] and finite
+        // (a NaN, which no edge direction is, becomes 0, where `clamp`
+        // would keep it), so within `i32`: the unchecked conversion is
+        // exact, as `as` would be, and converts four lanes at once where
+        // `as` (saturating) goes one by one. The upper end is never
+        // reached (CELL_LIMIT).
+        #[allow(clippy::manual_clamp)] // `clamp` keeps a NaN: see above.
+        let whole: i32 = unsafe { t.max(0.0).min(CELL_LIMIT).to_int_unchecked() };
         whole + i32::from(t > 0.0)
     };
     let (x, y) = (x as f32, y as f32);
@@ -662,6 +667,28 @@ mod tests {
         };
         voter.vote(w, h, r_min, r_max);
         assert_eq!(voter.votes, votes_one_by_one(w, h, &edges, r_min, r_max));
+    }
+
+    /// `min_contrast_gray` may be 0 (its range is [0, 255]): the flat
+    /// pixels, without a gradient, must still make no edges, whose
+    /// direction would be 0 / 0 and whose votes would be cast at NaN
+    /// (the unchecked conversion in `cast_votes`).
+    #[test]
+    fn a_zero_contrast_threshold_makes_no_edges_without_a_direction() {
+        let img = scene(true);
+        let mut voter = EdgeVoter::default();
+        let circles = voter.find(&img, 0.0, 12.0, 120.0, 3);
+        assert!(!voter.edges.is_empty());
+        assert!(
+            voter
+                .edges
+                .iter()
+                .all(|(_, [gx, gy])| gx.is_finite() && gy.is_finite()),
+            "an edge without a direction"
+        );
+        let flat = img.pixels.len() - voter.edges.len();
+        assert!(flat > 0, "the scene has flat pixels");
+        assert!(circles.iter().all(|c| c.radius_px.is_finite()));
     }
 
     /// A configuration whose farthest range makes the smallest disc larger
