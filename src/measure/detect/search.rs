@@ -540,7 +540,7 @@ impl Detector {
             centre_px = ?[seed.centre_px[0].round(), seed.centre_px[1].round()],
             radius_px = seed.a_px.round(),
             kind = seed.kind,
-            result = ?r.as_ref().map(|v| v.score),
+            result = ?r.as_ref().map(|v| (v.score, v.canopy)),
             "candidate"
         );
         let v = self.prefer_inner_disc(image, r?, index);

@@ -189,6 +189,26 @@ pub(super) fn shaded_points(points_px: &[[f64; 2]], edges: &[ShadedEdge]) -> Vec
         .collect()
 }
 
+/// How much of a rim a glare may hide, for a narrow pass.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum GlareCover {
+    /// None or a part of it: steps into saturated pixels give no rim
+    /// points.
+    Part,
+    /// So much of the rim that too few rays found it (the pass is
+    /// repeated closer): a step with saturated pixels inward of it lies
+    /// beyond the glare (the canopy's edge seen past it), not on the disc's
+    /// rim, and gives no rim point either.
+    Most,
+}
+
+/// Whether profile `p` (sampled from `s_min` every `step`) is saturated
+/// anywhere inward of step `e`'s crossing.
+fn glare_before_step(p: &[f32], s_min: f64, step: f64, e: &rim::RayEdge) -> bool {
+    let end = (((e.s - s_min) / step).max(0.0) as usize).min(p.len());
+    p[..end].iter().any(|&v| v >= SATURATED_GRAY)
+}
+
 /// Whether the light side of step `e` (from its crossing to a few samples
 /// past its light end) on profile `p` (sampled from `s_min` every `step`)
 /// reaches saturation.
@@ -628,6 +648,27 @@ impl Detector {
         max_points: u32,
         rim_use: RimUse,
     ) -> Result<RimPass, Reject> {
+        self.rim_pass_at(
+            image,
+            start,
+            spacing_px,
+            max_points,
+            rim_use,
+            GlareCover::Part,
+        )
+    }
+
+    /// [`Self::rim_pass`]; `cover` says whether a glare hides most of the
+    /// rim, so that the pass looks again, closer, at what it leaves.
+    fn rim_pass_at(
+        &mut self,
+        image: &GrayImage,
+        start: &Ellipse,
+        spacing_px: f64,
+        max_points: u32,
+        rim_use: RimUse,
+        cover: GlareCover,
+    ) -> Result<RimPass, Reject> {
         let centre = self.camera.distort_px([start.cx, start.cy]);
         let perimeter = TAU * ((start.a * start.a + start.b * start.b) / 2.0).sqrt();
         let rays =
@@ -745,7 +786,8 @@ impl Detector {
                     } else {
                         &self.profile
                     };
-                    let glare = glare_on_light_side(raw, s0, 0.5, &e);
+                    let glare = glare_on_light_side(raw, s0, 0.5, &e)
+                        || (cover == GlareCover::Most && glare_before_step(raw, s0, 0.5, &e));
                     if half > 0 {
                         let mid = 0.5 * (e.dark + e.light);
                         let reach = 0.5 * self.smoothing_spread_px[half] + 1.0;
@@ -840,6 +882,20 @@ impl Detector {
             return Err(Reject::OutOfImage);
         }
         if undistorted.len() < self.cfg.min_rim_points as usize {
+            // A glare over much of the rim leaves few rays on the rest: that
+            // rest is looked at twice as closely (to the configured spacing
+            // at most) before the pass gives up.
+            let closer = 0.5 * spacing_px;
+            if glares_dropped && closer >= self.cfg.rim_point_spacing_px {
+                return self.rim_pass_at(
+                    image,
+                    start,
+                    closer,
+                    max_points,
+                    rim_use,
+                    GlareCover::Most,
+                );
+            }
             return Err(Reject::FewEdges(undistorted.len()));
         }
         let min_tol = self.cfg.inlier_tolerance_px.max(0.1);
