@@ -27,8 +27,10 @@ mod coarse;
 pub mod conic_fit;
 mod edges;
 mod evidence;
+mod glare;
 pub mod rim;
 mod search;
+mod shading;
 #[cfg(test)]
 mod tests;
 mod verify;

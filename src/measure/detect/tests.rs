@@ -623,10 +623,10 @@ fn a_step_into_saturation_is_glare() {
     };
     let glare = ramp(255.0);
     let e = super::rim::strongest_rise(&glare, 0.0, 0.5, 12.0).expect("a step");
-    assert!(super::verify::glare_on_light_side(&glare, 0.0, 0.5, &e));
+    assert!(super::glare::glare_on_light_side(&glare, 0.0, 0.5, &e));
     let canopy = ramp(180.0);
     let e = super::rim::strongest_rise(&canopy, 0.0, 0.5, 12.0).expect("a step");
-    assert!(!super::verify::glare_on_light_side(&canopy, 0.0, 0.5, &e));
+    assert!(!super::glare::glare_on_light_side(&canopy, 0.0, 0.5, &e));
 }
 
 /// The angle between two directions, as `rem_euclid` gives it.
@@ -727,11 +727,11 @@ fn a_blurred_edge_on_a_shaded_canopy_is_placed_at_the_edge() {
     let edges: Vec<_> = (0..12)
         .map(|_| {
             let slope = super::rim::light_side_slope(&profile, 0.0, 0.5, &e);
-            super::verify::ShadedEdge::new([1.0, 0.0], &e, slope)
+            super::shading::ShadedEdge::new([1.0, 0.0], &e, slope)
         })
         .collect();
     let points = vec![[e.s, 0.0]; 12];
-    let moved = super::verify::shaded_points(&points, &edges);
+    let moved = super::shading::shaded_points(&points, &edges);
     for p in moved {
         assert!(
             (p[0] - edge).abs() < 0.05,

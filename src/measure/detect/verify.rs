@@ -2,11 +2,12 @@
 //! fit, and the narrow pass around it (repeated until it settles), with the
 //! checks of the rim itself (size, shape, contrast, one dark inside).
 
+use super::glare::{GlareCover, glare_before_step, glare_on_light_side};
 use super::search::Seed;
+use super::shading::{ShadedEdge, shaded_points};
 use super::{
-    Detector, Reject, SATURATED_GRAY, VEIL_MIN_GRAY, VEIL_SIGMAS, Verified, conic_fit, median,
-    polar_radius, polar_radius_local, ray_directions, rim, smoothing_half_for_contrast,
-    smoothing_half_for_ramp,
+    Detector, Reject, VEIL_MIN_GRAY, VEIL_SIGMAS, Verified, conic_fit, median, polar_radius,
+    polar_radius_local, ray_directions, rim, smoothing_half_for_contrast, smoothing_half_for_ramp,
 };
 use crate::measure::ellipse::Ellipse;
 use image::GrayImage;
@@ -110,115 +111,6 @@ pub(super) enum RimUse {
     Scout,
     /// The pass whose points the pose is measured from.
     Measure,
-}
-
-/// One ray's edge, for placing it on a shaded canopy.
-pub(super) struct ShadedEdge {
-    /// The ray's direction (unit, distorted pixels).
-    dir: [f64; 2],
-    /// From the edge out to where its light level was taken, pixels.
-    level_distance_px: f64,
-    /// The profile's slope at the edge, gray levels per pixel.
-    ramp_slope: f64,
-    /// The light side's slope beyond the step over the step's contrast,
-    /// per pixel (NaN where not measured).
-    relative_slope: f64,
-    /// The step's contrast, gray levels.
-    contrast: f64,
-    /// The step's width as seen (blur and the profile's smoothing
-    /// together), pixels.
-    width_px: f64,
-}
-
-impl ShadedEdge {
-    /// The edge `e` found on the ray in direction `dir`, with its light
-    /// side's slope ([`rim::light_side_slope`], gray levels per pixel).
-    pub(super) fn new(dir: [f64; 2], e: &rim::RayEdge, light_slope: f32) -> Self {
-        Self {
-            dir,
-            // The light level is the mean of three samples from `light_s`:
-            // its centre is a sample (0.5 px) further.
-            level_distance_px: e.light_s + 0.5 - e.s,
-            ramp_slope: f64::from(e.ramp_slope),
-            relative_slope: f64::from(light_slope / (e.light - e.dark)),
-            contrast: f64::from(e.light - e.dark),
-            width_px: 2.0 * (e.light_s - e.s),
-        }
-    }
-}
-
-/// The edges of a pass moved to where a canopy shaded toward the disc puts
-/// them. The drogue's canopy brightens away from the disc, so the light
-/// level taken beyond a step is above the canopy's level at the edge by
-/// its slope times that distance; the mid level is too high by half that,
-/// and the crossing too far out by that over the ramp's slope: nothing on a
-/// sharp step, a quarter pixel at 8 px of motion blur, all round the rim
-/// where the blur runs along it (the disc fitted too large, the range too
-/// short by 0.1-0.6 % on average on the reference renderer's blurred and
-/// hazy sets). Less the part that levels taken at the edge itself leave: a
-/// box blur of width `L` (the step's width as seen, blur and smoothing
-/// together) over a side of slope `g` lifts the ramp's middle by `g L / 8`.
-/// The shading is one property of the canopy, so its slope is the median
-/// over the pass's rays of each ray's light-side slope relative to its
-/// contrast (one ray's slope, over a few samples, is mostly noise), and
-/// each ray's move is at most half the distance it corrects for.
-pub(super) fn shaded_points(points_px: &[[f64; 2]], edges: &[ShadedEdge]) -> Vec<[f64; 2]> {
-    let mut slopes: Vec<f64> = edges
-        .iter()
-        .map(|e| e.relative_slope)
-        .filter(|s| s.is_finite())
-        .collect();
-    if slopes.len() < points_px.len() / 2 || slopes.is_empty() {
-        return points_px.to_vec();
-    }
-    let relative_slope = median(&mut slopes);
-    points_px
-        .iter()
-        .zip(edges)
-        .map(|(p, e)| {
-            let excess =
-                relative_slope * e.contrast * (0.5 * e.level_distance_px - 0.125 * e.width_px);
-            let limit = 0.5 * e.level_distance_px.max(0.0);
-            let shift = if e.ramp_slope > 0.0 {
-                (-excess / e.ramp_slope).clamp(-limit, limit)
-            } else {
-                0.0
-            };
-            [p[0] + shift * e.dir[0], p[1] + shift * e.dir[1]]
-        })
-        .collect()
-}
-
-/// How much of a rim a glare may hide, for a narrow pass.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-enum GlareCover {
-    /// None or a part of it: steps into saturated pixels give no rim
-    /// points.
-    Part,
-    /// So much of the rim that too few rays found it (the pass is
-    /// repeated closer): a step with saturated pixels inward of it lies
-    /// beyond the glare (the canopy's edge seen past it), not on the disc's
-    /// rim, and gives no rim point either.
-    Most,
-}
-
-/// Whether profile `p` (sampled from `s_min` every `step`) is saturated
-/// anywhere inward of step `e`'s crossing.
-fn glare_before_step(p: &[f32], s_min: f64, step: f64, e: &rim::RayEdge) -> bool {
-    let end = (((e.s - s_min) / step).max(0.0) as usize).min(p.len());
-    p[..end].iter().any(|&v| v >= SATURATED_GRAY)
-}
-
-/// Whether the light side of step `e` (from its crossing to a few samples
-/// past its light end) on profile `p` (sampled from `s_min` every `step`)
-/// reaches saturation.
-pub(super) fn glare_on_light_side(p: &[f32], s_min: f64, step: f64, e: &rim::RayEdge) -> bool {
-    let Some(last) = p.len().checked_sub(1) else {
-        return false;
-    };
-    let index = |s: f64| (((s - s_min) / step).max(0.0) as usize).min(last);
-    let (from, to) = (index(e.s), (index(e.light_s) + 2).min(last));
-    p[from..=to].iter().any(|&v| v >= SATURATED_GRAY)
 }
 
 /// Levels of a rim step that the fill test compares the inside with.
