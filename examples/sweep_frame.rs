@@ -1,0 +1,157 @@
+//! One frame of the robustness sweep, looked at closely: what it was drawn
+//! with, its truth, what the measurement gave and how far off it is, and
+//! (with `--crop DIR`) the frame around the drogue written as a PNG at twice
+//! its size.
+//!
+//! `cargo run --release --example sweep_frame -- SEED LEVEL INDEX [--crop DIR]`
+//!
+//! LEVEL is a level's label as the sweep's table and `SWEEP_TRACE=1` print
+//! it (`everything`, `glare streak 30 px wide`, `no drogue: crescent`).
+//! `RUST_LOG=drogue_vision::measure::detect=debug` adds the detector's line
+//! per candidate (where it was, what kind of seed, why it was dropped), and
+//! `=trace` each rim pass. This is how a miss of the sweep is studied: the
+//! sweep names the frame, this shows why.
+
+#[path = "../tests/sweep/mod.rs"]
+mod sweep;
+
+use drogue_sim::geometry::V3;
+use drogue_sim::sweep::{Sweep, standard_levels};
+
+fn usage(message: &str) -> ! {
+    eprintln!("{message}\nusage: sweep_frame SEED LEVEL INDEX [--crop DIR]");
+    std::process::exit(2)
+}
+
+/// Half the side of the crop around the drogue, frame pixels.
+const CROP_HALF_PX: i64 = 100;
+
+fn main() {
+    tracing_subscriber::fmt()
+        .with_env_filter(tracing_subscriber::EnvFilter::from_default_env())
+        .with_writer(std::io::stderr)
+        .with_ansi(false)
+        .init();
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let (seed, label, index, crop) = match args.as_slice() {
+        [seed, label, index] => (seed, label, index, None),
+        [seed, label, index, flag, dir] if flag == "--crop" => (seed, label, index, Some(dir)),
+        _ => usage("three arguments, then optionally --crop DIR"),
+    };
+    let seed: u64 = seed
+        .parse()
+        .unwrap_or_else(|_| usage("SEED: a whole number"));
+    let index: u64 = index
+        .parse()
+        .unwrap_or_else(|_| usage("INDEX: a whole number"));
+    let levels = standard_levels();
+    let Some(level) = levels.iter().find(|l| l.label() == *label) else {
+        let labels: Vec<String> = levels.iter().map(drogue_sim::sweep::Level::label).collect();
+        usage(&format!(
+            "no level {label:?}; the levels: {}",
+            labels.join(", ")
+        ))
+    };
+
+    let frame = Sweep::new(seed).frame(level, index);
+    let s = &frame.settings;
+    println!(
+        "drawn with: range {:.2} m, tilt {:.0} deg, gain {:.2}, read noise {:.1} DN, vignette {:.2}, \
+         haze {:.2}, blur {:.1} px, glare streak {}, probe {}, distractors {}{}, throat shadow {:.2}, lens k1 {:.2}",
+        s.range_m,
+        s.tilt_deg,
+        s.gain,
+        s.read_noise_dn,
+        s.vignette,
+        s.haze,
+        s.blur_px,
+        s.glare_width_px
+            .map_or("none".into(), |w| format!("{w:.0} px wide")),
+        s.probe_bin.map_or("none".into(), |(lo, hi)| format!(
+            "over {:.0}-{:.0} % of the rim",
+            100.0 * lo,
+            100.0 * hi
+        )),
+        s.distractors,
+        if s.star_distractors { " and stars" } else { "" },
+        s.throat_shade,
+        s.distortion[0],
+    );
+    let (m, truth) = sweep::measure_one(seed, level, index);
+    match &truth {
+        Some(t) => println!(
+            "truth: ellipse centre ({:.2}, {:.2}) axes {:.2}/{:.2} px (undistorted), range {:.2} m, \
+             tilt {:.1} deg, {:.0} % of the rim visible",
+            t.ellipse.cx,
+            t.ellipse.cy,
+            t.ellipse.a,
+            t.ellipse.b,
+            t.range_m,
+            t.tilt_deg,
+            100.0 * t.visible_rim_frac
+        ),
+        None => println!("truth: no drogue"),
+    }
+    match (&m.detection, &truth) {
+        (None, _) => println!("measured: not detected"),
+        (Some(d), t) => {
+            let e = &d.ellipse_px;
+            println!(
+                "measured: ellipse centre ({:.2}, {:.2}) axes {:.2}/{:.2} px, {:?}",
+                e.cx, e.cy, e.a, e.b, d.disambiguation
+            );
+            if let Some(t) = t {
+                let p = &d.pose_camera.centre_camera_m;
+                let off = |q: [f64; 3]| {
+                    100.0 * (0..3).map(|i| (p[i] - q[i]).powi(2)).sum::<f64>().sqrt() / t.range_m
+                };
+                println!(
+                    "off: centre {:.3} px, position {:.3} % of range from the truth, {:.3} % from its mirror",
+                    (e.cx - t.ellipse.cx).hypot(e.cy - t.ellipse.cy),
+                    off(t.position_camera),
+                    off(t.alt_position_camera)
+                );
+            }
+        }
+    }
+
+    if let Some(dir) = crop {
+        // Around where the drogue is in the frame (distorted pixels), or
+        // the frame's middle without one.
+        let (w, h) = (frame.image.width(), frame.image.height());
+        let centre = truth
+            .and_then(|t| {
+                let c = t.position_camera;
+                frame.camera.project_px(&V3::new(c[0], c[1], c[2]))
+            })
+            .unwrap_or([f64::from(w) / 2.0, f64::from(h) / 2.0]);
+        let clamp = |v: f64, side: u32| {
+            (v.round() as i64 - CROP_HALF_PX).clamp(0, (i64::from(side) - 2 * CROP_HALF_PX).max(0))
+                as u32
+        };
+        let (x0, y0) = (clamp(centre[0], w), clamp(centre[1], h));
+        let side = 2 * CROP_HALF_PX as u32;
+        let cut =
+            image::imageops::crop_imm(&frame.image, x0, y0, side.min(w), side.min(h)).to_image();
+        let big = image::imageops::resize(
+            &cut,
+            2 * cut.width(),
+            2 * cut.height(),
+            image::imageops::FilterType::Nearest,
+        );
+        let path = std::path::Path::new(dir).join(format!(
+            "sweep_{seed}_{}_{index}.png",
+            label.replace([' ', ':', '%', ','], "_")
+        ));
+        match big.save(&path) {
+            Ok(()) => println!(
+                "crop ({x0}, {y0}) + {side} px, twice its size: {}",
+                path.display()
+            ),
+            Err(e) => {
+                eprintln!("could not write {}: {e}", path.display());
+                std::process::exit(1)
+            }
+        }
+    }
+}
