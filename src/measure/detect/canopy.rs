@@ -416,6 +416,7 @@ fn pose_ring(
                 start,
                 tolerance + half,
                 edge.min_step_gray,
+                min_rise,
                 scratch,
             )
         };
@@ -499,11 +500,13 @@ struct OuterEdge {
 
 /// Where the drogue ends along a profile across the predicted rim (samples
 /// [`STEP_PX`] apart from offset `start`, pixels): the outermost place where
-/// the profile leaves the background's level by at least `min_step`, with
-/// most of the profile inside it off that level too (band and canopy), or
-/// `None`. The background is the median of the samples beyond offset
-/// `outside_from`. `scratch` is reused between calls (this runs per rim
-/// point).
+/// the profile leaves the background's level by at least `min_step`, next
+/// to a place off it by `noise_step` (the step the frame's noise does not
+/// make, at least `min_step`), with the level changing by `min_step` across
+/// it and most of the profile inside it off that level too (band and
+/// canopy), or `None`. The background is the median of the samples beyond
+/// offset `outside_from`. `scratch` is reused between calls (this runs per
+/// rim point).
 ///
 /// Either polarity counts. The rim band is darker than a clear sky, but haze
 /// lifts the band toward the airlight, above a darker patch of sky or a
@@ -515,6 +518,7 @@ fn outer_edge_offset(
     start: f64,
     outside_from: f64,
     min_step: f32,
+    noise_step: f32,
     scratch: &mut Vec<f32>,
 ) -> Option<OuterEdge> {
     let first_outside = ((outside_from - start) / STEP_PX).ceil().max(0.0) as usize;
@@ -535,7 +539,30 @@ fn outer_edge_offset(
     scratch.extend(profile.windows(n).map(|w| w.iter().sum::<f32>() / n as f32));
     let means: &[f32] = scratch;
     let off = |m: f32| (m - background).abs() >= min_step;
-    let edge = means.iter().rposition(|&m| off(m))?;
+    // The edge is followed out from the outermost mean off the background
+    // by a step that noise does not make (`noise_step`), through the means
+    // next to it off by `min_step`: in noise a box mean out in the sky
+    // leaves the background's level by `min_step` now and then, and taking
+    // the outermost such mean placed the drogue's end out in the sky, where
+    // most of the profile inside it is not off (refused). Without a mean
+    // that far off, the outermost off by `min_step`.
+    let edge = match means
+        .iter()
+        .rposition(|&m| (m - background).abs() >= noise_step)
+    {
+        Some(strong) => strong + means[strong + 1..].iter().take_while(|&&m| off(m)).count(),
+        None => means.iter().rposition(|&m| off(m))?,
+    };
+    // An end is a step: the level changes by `min_step` across it within
+    // a box either side (a sky brightening slowly across the predicted
+    // rim leaves the background somewhere too, and is no edge).
+    let (inward, outward) = (
+        means[edge.saturating_sub(n)],
+        means[(edge + n).min(means.len() - 1)],
+    );
+    if (inward - outward).abs() < min_step {
+        return None;
+    }
     let inside = &means[..=edge];
     let away = inside.iter().filter(|&&m| off(m)).count();
     if (away as f64) < OUTER_MIN_INSIDE_SHARE * inside.len() as f64 {
@@ -558,6 +585,61 @@ fn outer_edge_offset(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A canopy at 175 ending 10 px into a profile (samples [`STEP_PX`]
+    /// apart from -10 px) on a sky at 135, with a level 14 gray levels
+    /// above the sky over 2.5 px (a box of the tests' 5 samples) at +20 px.
+    fn canopy_then_sky_with_a_blip() -> Vec<f32> {
+        (0..80)
+            .map(|k| {
+                let at = -10.0 + f64::from(k) * STEP_PX;
+                if at < 0.0 {
+                    175.0
+                } else if (20.0..22.5).contains(&at) {
+                    149.0
+                } else {
+                    135.0
+                }
+            })
+            .collect()
+    }
+
+    #[test]
+    fn a_blip_of_noise_out_in_the_sky_is_not_the_drogues_end() {
+        // In noise whose steps reach 16 gray levels, the blip of 14 is
+        // noise: the drogue ends where the canopy does.
+        let profile = canopy_then_sky_with_a_blip();
+        let mut scratch = Vec::new();
+        let edge = outer_edge_offset(&profile, 4, -10.0, 3.0, 12.0, 16.0, &mut scratch)
+            .expect("the canopy's end");
+        assert!(edge.offset_px.abs() <= 1.0, "{}", edge.offset_px);
+        assert!(edge.lighter_inside);
+        // Without noise a step of 14 is a step: the outermost one is the
+        // drogue's end, and most of the profile inside it is sky (refused),
+        // as before the noise was taken into account.
+        let quiet = outer_edge_offset(&profile, 4, -10.0, 3.0, 12.0, 12.0, &mut scratch);
+        assert!(quiet.is_none(), "{:?}", quiet.map(|e| e.offset_px));
+    }
+
+    #[test]
+    fn a_sky_brightening_slowly_across_the_rim_is_no_end() {
+        // 40 gray levels over 40 px, 0.5 per sample: it leaves the
+        // background's level (by 12) with most of the profile inside it
+        // off too, but changes by 5 across two boxes: no step.
+        let ramp: Vec<f32> = (0..120)
+            .map(|k| 175.0 - 0.5 * (k as f32).min(80.0))
+            .collect();
+        let mut scratch = Vec::new();
+        let end = outer_edge_offset(&ramp, 4, -10.0, 3.0, 12.0, 12.0, &mut scratch);
+        assert!(end.is_none(), "{:?}", end.map(|e| e.offset_px));
+        // The same 40 levels as a step at 0 px are an end there.
+        let step: Vec<f32> = (0..120)
+            .map(|k| if k < 20 { 175.0 } else { 135.0 })
+            .collect();
+        let end = outer_edge_offset(&step, 4, -10.0, 3.0, 12.0, 12.0, &mut scratch)
+            .expect("a step's end");
+        assert!(end.offset_px.abs() <= 1.0, "{}", end.offset_px);
+    }
 
     #[test]
     fn nearest_by_angle_is_the_scans_answer_across_the_turn() {
