@@ -392,6 +392,24 @@ fn a_star_whose_canopy_says_nothing_is_no_drogue() {
     assert!(found.is_empty(), "{found:#?}");
 }
 
+/// The canopy's end must be a step (`outer_edge_offset` in
+/// `src/measure/detect/canopy.rs`): the predicted canopy rim of an ellipse
+/// through a flower's lobes, or round dark blobs, lies in the sky, and a
+/// sky brightening slowly across it left the background's level somewhere
+/// on many of its points. Seeds 25 and 28 (stars and flowers, dark blobs),
+/// never looked at while the rule was written, were false detections
+/// before it; seed 23's flower was one once the drogue's end was followed
+/// past the noise without it.
+#[test]
+fn a_sky_brightening_across_a_look_alikes_rim_is_no_canopy() {
+    let mut found = detections_among_stars(&[(23, 6), (25, 2), (28, 8)]);
+    found.extend(detections_on(
+        "no drogue: dark blobs, rectangles",
+        &[(28, 8)],
+    ));
+    assert!(found.is_empty(), "{found:#?}");
+}
+
 /// The scoring itself: truth and measurement meet in the same (undistorted)
 /// pixels, also through a strongly distorting lens; a drogue-free level
 /// expects nothing; and the limits catch a level that gets worse.
