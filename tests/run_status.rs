@@ -41,40 +41,44 @@ fn pane_while_running(extra_env: &str) -> Option<String> {
         return None;
     }
     let dir = tempfile::tempdir().unwrap();
-    // One name per call: the tests run in parallel threads of one process,
-    // and a second session of the same name is refused ("duplicate
-    // session"), which failed one of them now and then.
+    // One tmux server per call (its own socket, `-L`): the tests run in
+    // parallel threads of one process, and two calls starting the default
+    // server at once failed one of them now and then ("server exited
+    // unexpectedly"; before that, "duplicate session").
     static CALLS: AtomicUsize = AtomicUsize::new(0);
     let call = CALLS.fetch_add(1, Ordering::Relaxed);
     let session = format!("dv-status-{}-{call}", std::process::id());
+    let tmux = |args: &[&str]| {
+        let mut c = Command::new("tmux");
+        c.args(["-L", &session]).args(args);
+        c
+    };
     let cmd = format!(
         "{extra_env} {BIN} run --source sim:approach --max-frames 150 \
          --mavlink udpout:127.0.0.1:9 --log-dir {}; sleep 30",
         dir.path().display()
     );
-    let ok = Command::new("tmux")
-        .args([
-            "new-session",
-            "-d",
-            "-x",
-            "200",
-            "-y",
-            "30",
-            "-s",
-            &session,
-            &cmd,
-        ])
-        .status()
-        .unwrap()
-        .success();
+    let ok = tmux(&[
+        "new-session",
+        "-d",
+        "-x",
+        "200",
+        "-y",
+        "30",
+        "-s",
+        &session,
+        &cmd,
+    ])
+    .status()
+    .unwrap()
+    .success();
     assert!(ok, "tmux new-session -s {session} failed");
     // The line appears after about a second; poll the pane for it.
     let end = Instant::now() + Duration::from_secs(20);
     let mut seen = String::new();
     while Instant::now() < end {
         std::thread::sleep(Duration::from_millis(300));
-        let cap = Command::new("tmux")
-            .args(["capture-pane", "-p", "-e", "-t", &session])
+        let cap = tmux(&["capture-pane", "-p", "-e", "-t", &session])
             .output()
             .unwrap();
         seen = String::from_utf8_lossy(&cap.stdout).into_owned();
@@ -82,9 +86,7 @@ fn pane_while_running(extra_env: &str) -> Option<String> {
             break;
         }
     }
-    let _ = Command::new("tmux")
-        .args(["kill-session", "-t", &session])
-        .status();
+    let _ = tmux(&["kill-server"]).status();
     Some(seen)
 }
 
