@@ -379,6 +379,23 @@ fn a_drogue_in_noise_shows_its_canopy_past_the_skys_blips() {
     assert!(wrong.is_empty(), "{wrong:#?}");
 }
 
+/// Motion blur leaves the steps where the rim runs along it as sharp as a
+/// sharp step, which measures about 2.6 px itself; the `Soft` test (a blob
+/// out of focus has no sharp step) counted only steps within 4 px, or 0.2
+/// of the minor radius, of nothing, and a small disc blurred half its minor
+/// radius had one sharp step in 71. These frames (blur 7-15 px over discs
+/// of 14-21 px minor radius) were undetected; each must be the disc.
+#[test]
+fn a_blurred_discs_steps_along_the_blur_count_as_sharp() {
+    let mut wrong = everything_frames_not_the_disc(&[(9, 12, true), (17, 17, true)]);
+    wrong.extend(frames_not_the_disc(
+        "motion blur 16 px",
+        &[(5, 20, true), (11, 20, true)],
+    ));
+    wrong.extend(frames_not_the_disc("motion blur 32 px", &[(24, 6, true)]));
+    assert!(wrong.is_empty(), "{wrong:#?}");
+}
+
 /// A star or flower on a drogue-free frame can pass for the disc: its
 /// core's rim, and its arms' edges where a canopy's rim would be. Its
 /// score stays low (0.30-0.39), and for neither pose does the canopy rim
