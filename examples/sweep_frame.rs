@@ -1,7 +1,9 @@
 //! One frame of the robustness sweep, looked at closely: what it was drawn
 //! with, its truth, what the measurement gave and how far off it is, and
-//! (with `--crop DIR`) the frame around the drogue written as a PNG at twice
-//! its size.
+//! (with `--crop DIR`) the frame around the drogue written as a PNG (at least
+//! 1.3 times its semi-major axis each way, twice its size up to 400 px a
+//! side); on a drogue-free frame around what was taken for one, if
+//! anything was.
 //!
 //! `cargo run --release --example sweep_frame -- SEED LEVEL INDEX [--crop DIR]`
 //!
@@ -116,27 +118,42 @@ fn main() {
     }
 
     if let Some(dir) = crop {
-        // Around where the drogue is in the frame (distorted pixels), or
-        // the frame's middle without one.
+        // Around where the drogue is in the frame (distorted pixels); on a
+        // drogue-free frame around what was taken for one (a false
+        // detection), else the frame's middle.
         let (w, h) = (frame.image.width(), frame.image.height());
         let centre = truth
             .and_then(|t| {
                 let c = t.position_camera;
                 frame.camera.project_px(&V3::new(c[0], c[1], c[2]))
             })
+            .or_else(|| {
+                // The detection's centre is in undistorted pixels: its
+                // ray, projected through the lens.
+                let c = &frame.camera;
+                let e = &m.detection.as_ref()?.ellipse_px;
+                c.project_px(&V3::new((e.cx - c.cx) / c.fx, (e.cy - c.cy) / c.fy, 1.0))
+            })
             .unwrap_or([f64::from(w) / 2.0, f64::from(h) / 2.0]);
+        // At least the disc (or what was taken for it) and some canopy.
+        let a = truth
+            .map(|t| t.ellipse.a)
+            .or_else(|| m.detection.as_ref().map(|d| d.ellipse_px.a))
+            .unwrap_or(0.0);
+        let half = CROP_HALF_PX.max((1.3 * a).ceil() as i64);
         let clamp = |v: f64, side: u32| {
-            (v.round() as i64 - CROP_HALF_PX).clamp(0, (i64::from(side) - 2 * CROP_HALF_PX).max(0))
-                as u32
+            (v.round() as i64 - half).clamp(0, (i64::from(side) - 2 * half).max(0)) as u32
         };
         let (x0, y0) = (clamp(centre[0], w), clamp(centre[1], h));
-        let side = 2 * CROP_HALF_PX as u32;
+        let side = 2 * half as u32;
         let cut =
             image::imageops::crop_imm(&frame.image, x0, y0, side.min(w), side.min(h)).to_image();
+        // Twice its size while that stays under 800 px a side.
+        let zoom = if side <= 400 { 2 } else { 1 };
         let big = image::imageops::resize(
             &cut,
-            2 * cut.width(),
-            2 * cut.height(),
+            zoom * cut.width(),
+            zoom * cut.height(),
             image::imageops::FilterType::Nearest,
         );
         let path = std::path::Path::new(dir).join(format!(
@@ -145,7 +162,7 @@ fn main() {
         ));
         match big.save(&path) {
             Ok(()) => println!(
-                "crop ({x0}, {y0}) + {side} px, twice its size: {}",
+                "crop ({x0}, {y0}) + {side} px, {zoom} times its size: {}",
                 path.display()
             ),
             Err(e) => {
