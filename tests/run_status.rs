@@ -34,9 +34,15 @@ fn a_piped_run_has_no_escape_codes() {
 }
 
 /// Runs `run` in a detached tmux session (a real terminal) and returns what
-/// the pane showed while it ran; `None` without tmux.
+/// the pane showed while it ran; `None` without tmux, unless
+/// `DROGUE_REQUIRE_TMUX` is set (`.ci/run` sets it after installing tmux),
+/// where a missing tmux fails the test instead of passing it unrun.
 fn pane_while_running(extra_env: &str) -> Option<String> {
     if !have_tmux() {
+        assert!(
+            std::env::var_os("DROGUE_REQUIRE_TMUX").is_none(),
+            "DROGUE_REQUIRE_TMUX is set but tmux is not installed (apt-get install tmux)"
+        );
         eprintln!("tmux not installed: skipped (apt-get install tmux)");
         return None;
     }
