@@ -381,10 +381,11 @@ fn a_drogue_in_noise_shows_its_canopy_past_the_skys_blips() {
 
 /// Motion blur leaves the steps where the rim runs along it as sharp as a
 /// sharp step, which measures about 2.6 px itself; the `Soft` test (a blob
-/// out of focus has no sharp step) counted only steps within 4 px, or 0.2
-/// of the minor radius, of nothing, and a small disc blurred half its minor
-/// radius had one sharp step in 71. These frames (blur 7-15 px over discs
-/// of 14-21 px minor radius) were undetected; each must be the disc.
+/// out of focus has no sharp step) counted a step sharp only within 4 px
+/// (or 0.2 of the minor radius) in all, and a small disc blurred half its
+/// minor radius had one sharp step in 71. These frames (blur 7-32 px over
+/// discs of 14-21 px minor semi-axis) were undetected; each must be the
+/// disc.
 #[test]
 fn a_blurred_discs_steps_along_the_blur_count_as_sharp() {
     let mut wrong = everything_frames_not_the_disc(&[(9, 12, true), (17, 17, true)]);
