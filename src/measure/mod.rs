@@ -294,9 +294,11 @@ impl Measurer {
             if !one_rim(&cand.ellipse_px, &fitted.ellipse) {
                 tracing::debug!(
                     seq = frame.seq,
+                    detector_centre_px = ?[cand.ellipse_px.cx, cand.ellipse_px.cy],
+                    fitted_centre_px = ?[fitted.ellipse.cx, fitted.ellipse.cy],
                     detector_axes_px = ?[cand.ellipse_px.a, cand.ellipse_px.b],
                     fitted_axes_px = ?[fitted.ellipse.a, fitted.ellipse.b],
-                    "not detected: the fit is not the rim the detector verified"
+                    "not detected: the fit is not the rim the detector verified (undistorted px)"
                 );
                 return None;
             }
