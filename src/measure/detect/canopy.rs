@@ -661,6 +661,23 @@ mod tests {
                 .map(|e| e.1);
             assert_eq!(nearest(&by_angle, angle).map(|e| e.1), scan, "at {angle}");
         }
+        // Directions over 0..2 pi (the fill test's), brought into atan2's
+        // turn for the lookup: the scan's answer for the direction itself.
+        for k in 0..720 {
+            let phi = f64::from(k) * std::f64::consts::TAU / 720.0;
+            let scan = by_angle
+                .iter()
+                .min_by(|x, y| {
+                    super::super::angle_gap(x.0, phi).total_cmp(&super::super::angle_gap(y.0, phi))
+                })
+                .map(|e| e.1);
+            let turned = if phi > std::f64::consts::PI {
+                phi - std::f64::consts::TAU
+            } else {
+                phi
+            };
+            assert_eq!(nearest(&by_angle, turned).map(|e| e.1), scan, "at {phi}");
+        }
         assert!(nearest::<usize>(&[], 0.0).is_none());
     }
     use image::Luma;

@@ -4,12 +4,12 @@
 
 use super::verify::{CLIPPED_SHARE, FillLevels, RimPass};
 use super::{
-    Detector, Reject, SATURATED_GRAY, VEIL_MIN_GRAY, VEIL_SIGMAS, Verified, angle_gap, canopy,
-    median, polar_radius, rim,
+    Detector, Reject, SATURATED_GRAY, VEIL_MIN_GRAY, VEIL_SIGMAS, Verified, canopy, median,
+    polar_radius, rim,
 };
 use crate::measure::ellipse::Ellipse;
 use image::GrayImage;
-use std::f64::consts::TAU;
+use std::f64::consts::{PI, TAU};
 
 /// A rim step no wider than a sharp step's own width
 /// ([`SHARP_STEP_OWN_PX`]) plus this share of the disc's minor radius (or
@@ -83,7 +83,8 @@ impl Detector {
     /// the middle of the rim's step. Samples lie on [`FILL_DIRECTIONS`] rays
     /// at [`FILL_FRACTIONS`] of the ellipse's radius; each is compared with
     /// the mid level of the rim edge nearest in angle (`levels`: angle about
-    /// the ellipse's centre, the step's levels), so that a glare veil or
+    /// the ellipse's centre as `atan2` gives it, the step's levels; sorted
+    /// by angle), so that a glare veil or
     /// vignetting across the disc does not count as light. A direction with
     /// a saturated sample (a glare) counts neither way, nor does a sample
     /// lighter than that edge's light side by more than the noise (a
@@ -104,9 +105,9 @@ impl Detector {
         for k in 0..FILL_DIRECTIONS {
             let phi = TAU * (k as f64 + 0.5) / FILL_DIRECTIONS as f64;
             let r = polar_radius(ellipse.a, ellipse.b, ellipse.theta, phi);
-            let gap = |a: f64| angle_gap(a, phi);
-            let Some(&(_, step)) = levels.iter().min_by(|x, y| gap(x.0).total_cmp(&gap(y.0)))
-            else {
+            // The lookup's angle in atan2's turn, as the levels' are.
+            let from_atan2 = if phi > PI { phi - TAU } else { phi };
+            let Some(&(_, step)) = canopy::nearest(levels, from_atan2) else {
                 continue;
             };
             let (sin, cos) = phi.sin_cos();

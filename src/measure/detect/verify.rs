@@ -843,6 +843,8 @@ impl Detector {
                 .iter()
                 .map(|&(p, levels)| ((p[1] - ellipse.cy).atan2(p[0] - ellipse.cx), levels)),
         );
+        // The fill test looks each direction up by angle.
+        fill_steps.sort_by(|a, b| a.0.total_cmp(&b.0));
         let fill = self.fill_share(image, &ellipse, &fill_steps);
         if fill < self.cfg.min_fill {
             return Err(Reject::LightInside(fill));
