@@ -608,6 +608,26 @@ fn support_on(
     Some(with_edge as f64 / judged as f64)
 }
 
+/// The values at two quantiles `q` (ascending) of `values`, each the
+/// element at `((len - 1) * q) as usize` of the sorted values, as a full
+/// sort would give them; `None` for no values. Two selections instead of
+/// the sort: the order of the rest is never used. `values` is reordered.
+fn percentiles(values: &mut [f64], q: [f64; 2]) -> Option<[f64; 2]> {
+    if values.is_empty() {
+        return None;
+    }
+    let at = |q: f64| ((values.len() as f64 - 1.0) * q) as usize;
+    let (lo, hi) = (at(q[0]), at(q[1]));
+    let (below, &mut high, _) = values.select_nth_unstable_by(hi, f64::total_cmp);
+    // Everything before `hi` is at most `high`: the lower one is among them.
+    let low = if lo < hi {
+        *below.select_nth_unstable_by(lo, f64::total_cmp).1
+    } else {
+        high
+    };
+    Some([low, high])
+}
+
 /// Where a motion blur smears the disc's rim: the directions (about the
 /// disc's centre, distorted pixels) whose rim steps are wider than the
 /// sharp ones (the 10th percentile of the widths) by more than half the
@@ -618,7 +638,8 @@ fn support_on(
 /// points out.
 pub struct SmearedRim {
     centre: [f64; 2],
-    /// (angle, width) of the rim steps, sorted by angle.
+    /// (angle, width) of the rim steps, sorted by angle (empty when there
+    /// is no blur to speak of: then none is looked up).
     widths: Vec<(f64, f64)>,
     /// Steps wider than this are smeared (infinite: no blur to speak of).
     limit_px: f64,
@@ -635,26 +656,27 @@ impl SmearedRim {
     /// From the disc's rim points (`points`, distorted pixels, about
     /// `centre`) and their step widths (pixels, aligned with them).
     pub fn new(centre: [f64; 2], points: &[[f64; 2]], widths: &[f64]) -> Self {
-        let mut by_angle: Vec<(f64, f64)> = points
-            .iter()
-            .zip(widths)
-            .filter(|(_, w)| w.is_finite())
-            .map(|(p, &w)| ((p[1] - centre[1]).atan2(p[0] - centre[0]), w))
-            .collect();
-        by_angle.sort_by(|a, b| a.0.total_cmp(&b.0));
-        let mut sorted: Vec<f64> = by_angle.iter().map(|a| a.1).collect();
-        sorted.sort_by(f64::total_cmp);
-        let at = |q: f64| {
-            sorted
-                .get(((sorted.len() as f64 - 1.0) * q) as usize)
-                .copied()
+        let finite = || {
+            points
+                .iter()
+                .zip(widths)
+                .filter(|(_, w)| w.is_finite())
+                .map(|(p, &w)| (p, w))
         };
-        let limit_px = match (at(0.1), at(0.9)) {
-            (Some(sharp), Some(wide)) if wide - sharp >= Self::MIN_BLUR_PX => {
+        let mut sorted: Vec<f64> = finite().map(|(_, w)| w).collect();
+        let limit_px = match percentiles(&mut sorted, [0.1, 0.9]) {
+            Some([sharp, wide]) if wide - sharp >= Self::MIN_BLUR_PX => {
                 sharp + 0.5 * (wide - sharp)
             }
             _ => f64::INFINITY,
         };
+        // Without a blur no point is ever looked up: the angles (an atan2
+        // a point) and their sort are only taken when there is one.
+        let mut by_angle: Vec<(f64, f64)> = Vec::new();
+        if limit_px.is_finite() {
+            by_angle.extend(finite().map(|(p, w)| ((p[1] - centre[1]).atan2(p[0] - centre[0]), w)));
+            by_angle.sort_by(|a, b| a.0.total_cmp(&b.0));
+        }
         Self {
             centre,
             widths: by_angle,
