@@ -126,6 +126,19 @@ pub(crate) fn isolated_inlier_runs(
     flagged
 }
 
+/// `d.rem_euclid(TAU)` for a difference of two angles in [-pi, pi]
+/// without its `fmod` call: `fmod` of a value under TAU in magnitude is
+/// that value exactly, so this is the same number (-0.0 included); only
+/// +-TAU itself is left to `rem_euclid`.
+fn wrap_gap(d: f64) -> f64 {
+    use std::f64::consts::TAU;
+    if d > -TAU && d < TAU {
+        if d < 0.0 { d + TAU } else { d }
+    } else {
+        d.rem_euclid(TAU)
+    }
+}
+
 /// The finite points in angular order about a centre, with the gaps
 /// between neighbours and the inlier flags.
 struct RimOrder<'a> {
@@ -155,11 +168,11 @@ impl<'a> RimOrder<'a> {
         }
         order.sort_by(|a, b| a.0.total_cmp(&b.0));
         let gaps: Vec<f64> = (0..m)
-            .map(|j| (order[(j + 1) % m].0 - order[j].0).rem_euclid(std::f64::consts::TAU))
+            .map(|j| wrap_gap(order[(j + 1) % m].0 - order[j].0))
             .collect();
-        let mut sorted = gaps.clone();
-        sorted.sort_by(f64::total_cmp);
-        let median_gap = sorted[m / 2];
+        // The median by selection: the order of the other gaps is never used.
+        let mut scratch = gaps.clone();
+        let median_gap = *scratch.select_nth_unstable_by(m / 2, f64::total_cmp).1;
         Some(Self {
             order,
             gaps,
@@ -178,8 +191,9 @@ impl<'a> RimOrder<'a> {
             .iter()
             .map(|&(_, i)| (points[i][0] - centre[0]).hypot(points[i][1] - centre[1]))
             .collect();
-        radii.sort_by(f64::total_cmp);
-        let spacing_px = self.median_gap * radii[radii.len() / 2];
+        let mid = radii.len() / 2;
+        let median_radius = *radii.select_nth_unstable_by(mid, f64::total_cmp).1;
+        let spacing_px = self.median_gap * median_radius;
         if spacing_px.is_nan() || spacing_px <= 0.0 {
             return 1;
         }

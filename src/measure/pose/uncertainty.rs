@@ -132,7 +132,13 @@ fn ellipse_covariance(
             n.x * sin_t + n.y * cos_t,
             n.y * sin_t,
         ]);
-        jtj += row * row.transpose();
+        // Upper triangle only (mirrored below): the products are the same
+        // either side of the diagonal, the outer product did each twice.
+        for c in 0..5 {
+            for r in 0..=c {
+                jtj[(r, c)] += row[r] * row[c];
+            }
+        }
         jt1 += row;
         along.push((sin_t.atan2(cos_t), n.dot(&(d - m * w))));
         if let Some(width) = step_widths_px.and_then(|ws| ws.get(i)) {
@@ -144,6 +150,7 @@ fn ellipse_covariance(
             }
         }
     }
+    jtj.fill_lower_triangle_with_upper_triangle();
     let inv = jtj.try_inverse()?;
     let inflation = neighbour_inflation(&mut along);
     // The two systematic displacements, each common to all points with an
@@ -169,8 +176,9 @@ fn neighbour_inflation(along: &mut [(f64, f64)]) -> f64 {
     }
     along.sort_by(|a, b| a.0.total_cmp(&b.0));
     let mut gaps: Vec<f64> = along.windows(2).map(|w| w[1].0 - w[0].0).collect();
-    gaps.sort_by(f64::total_cmp);
-    let max_gap = 3.0 * gaps[gaps.len() / 2];
+    // The median by selection: the order of the other gaps is never used.
+    let mid = gaps.len() / 2;
+    let max_gap = 3.0 * *gaps.select_nth_unstable_by(mid, f64::total_cmp).1;
     let (mut cross, mut pairs) = (0.0, 0usize);
     for w in along.windows(2) {
         if w[1].0 - w[0].0 <= max_gap {
