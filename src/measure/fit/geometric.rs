@@ -120,6 +120,25 @@ impl Geometry {
     }
 }
 
+/// (row, column) of the upper triangle of a 5x5 matrix, column by column.
+const UPPER: [(usize, usize); 15] = [
+    (0, 0),
+    (0, 1),
+    (1, 1),
+    (0, 2),
+    (1, 2),
+    (2, 2),
+    (0, 3),
+    (1, 3),
+    (2, 3),
+    (3, 3),
+    (0, 4),
+    (1, 4),
+    (2, 4),
+    (3, 4),
+    (4, 4),
+];
+
 /// Sum of squared distances, and the Gauss-Newton normal equations.
 fn evaluate(
     e: &Ellipse,
@@ -128,8 +147,12 @@ fn evaluate(
     warm: bool,
 ) -> (f64, Matrix5<f64>, Vector5<f64>) {
     let g = Geometry::new(e);
-    let mut h = Matrix5::zeros();
-    let mut grad = Vector5::zeros();
+    // H's upper triangle (column by column) and the gradient, summed in
+    // plain arrays: the same sums in the same order as into the matrices,
+    // but they stay in registers and vectorise (one point's 15 products are
+    // independent), about half the instructions of the matrix updates.
+    let mut upper = [0.0; 15];
+    let mut grad = [0.0; 5];
     let mut cost = 0.0;
     for (p, t) in points.iter().zip(params.iter_mut()) {
         let foot = g.foot(*p, warm.then_some(*t));
@@ -141,24 +164,28 @@ fn evaluate(
             g.sin * foot.nx + g.cos * foot.ny,
         );
         let (fx, fy) = (e.a * foot.ct, e.b * foot.st);
-        let j = Vector5::new(
+        let j = [
             -nwx,
             -nwy,
             -foot.nx * foot.ct,
             -foot.ny * foot.st,
             foot.nx * fy - foot.ny * fx,
-        );
+        ];
         // Upper triangle only: H is symmetric.
-        for col in 0..5 {
-            for row in 0..=col {
-                h[(row, col)] += j[row] * j[col];
-            }
+        for (u, (row, col)) in upper.iter_mut().zip(UPPER) {
+            *u += j[row] * j[col];
         }
-        grad.axpy(r, &j, 1.0);
+        for (g, j) in grad.iter_mut().zip(j) {
+            *g += r * j;
+        }
         cost += r * r;
     }
-    h.fill_lower_triangle_with_upper_triangle();
-    (cost, h, grad)
+    let mut h = Matrix5::zeros();
+    for (u, (row, col)) in upper.into_iter().zip(UPPER) {
+        h[(row, col)] = u;
+        h[(col, row)] = u;
+    }
+    (cost, h, Vector5::from(grad))
 }
 
 /// A Levenberg-Marquardt step shorter than this (normalised coordinates:
