@@ -417,9 +417,11 @@ fn supports_with(
         _ => None,
     };
     // Edge scatter along the better-supported rim.
-    let found = offsets
-        .each_ref()
-        .map(|o| o.iter().filter_map(matched).collect::<Vec<f64>>());
+    let found = offsets.each_ref().map(|o| {
+        let mut found = Vec::with_capacity(o.len());
+        found.extend(o.iter().filter_map(matched));
+        found
+    });
     let better = if found[0].len() >= found[1].len() {
         0
     } else {
@@ -506,16 +508,27 @@ struct RimPoint {
 fn distance_to_rim(p: [f64; 2], rim: &[RimPoint], start: Option<usize>) -> (f64, usize) {
     let n = rim.len();
     let d2 = |k: usize| (rim[k].at[0] - p[0]).powi(2) + (rim[k].at[1] - p[1]).powi(2);
+    // Neighbours round the rim without an integer division each.
+    let next_of = |k: usize| if k + 1 == n { 0 } else { k + 1 };
+    let prev_of = |k: usize| if k == 0 { n - 1 } else { k - 1 };
     let mut k = match start {
         Some(k) => k % n,
         None => (0..n).min_by(|&a, &b| d2(a).total_cmp(&d2(b))).unwrap_or(0),
     };
+    // The current point's squared distance is kept, not recomputed for
+    // each comparison.
+    let mut here_d2 = d2(k);
     loop {
-        let (next, prev) = ((k + 1) % n, (k + n - 1) % n);
-        if d2(next) < d2(k) {
-            k = next;
-        } else if d2(prev) < d2(k) {
-            k = prev;
+        let next = next_of(k);
+        let next_d2 = d2(next);
+        if next_d2 < here_d2 {
+            (k, here_d2) = (next, next_d2);
+            continue;
+        }
+        let prev = prev_of(k);
+        let prev_d2 = d2(prev);
+        if prev_d2 < here_d2 {
+            (k, here_d2) = (prev, prev_d2);
         } else {
             break;
         }
@@ -531,7 +544,7 @@ fn distance_to_rim(p: [f64; 2], rim: &[RimPoint], start: Option<usize>) -> (f64,
         (p[0] - a[0] - t * d[0]).hypot(p[1] - a[1] - t * d[1])
     };
     let here = rim[k].at;
-    let dist = segment(rim[(k + n - 1) % n].at, here).min(segment(here, rim[(k + 1) % n].at));
+    let dist = segment(rim[prev_of(k)].at, here).min(segment(here, rim[next_of(k)].at));
     (dist, k)
 }
 
@@ -663,7 +676,8 @@ impl SmearedRim {
                 .filter(|(_, w)| w.is_finite())
                 .map(|(p, &w)| (p, w))
         };
-        let mut sorted: Vec<f64> = finite().map(|(_, w)| w).collect();
+        let mut sorted: Vec<f64> = Vec::with_capacity(widths.len());
+        sorted.extend(finite().map(|(_, w)| w));
         let limit_px = match percentiles(&mut sorted, [0.1, 0.9]) {
             Some([sharp, wide]) if wide - sharp >= Self::MIN_BLUR_PX => {
                 sharp + 0.5 * (wide - sharp)
@@ -674,6 +688,7 @@ impl SmearedRim {
         // a point) and their sort are only taken when there is one.
         let mut by_angle: Vec<(f64, f64)> = Vec::new();
         if limit_px.is_finite() {
+            by_angle.reserve_exact(sorted.len());
             by_angle.extend(finite().map(|(p, w)| ((p[1] - centre[1]).atan2(p[0] - centre[0]), w)));
             by_angle.sort_by(|a, b| a.0.total_cmp(&b.0));
         }

@@ -156,12 +156,16 @@ struct RimOrder<'a> {
 impl<'a> RimOrder<'a> {
     /// `None` under 8 points: too few to tell a stretch from noise.
     fn new(points: &[[f64; 2]], centre: [f64; 2], inliers: &'a [bool]) -> Option<Self> {
-        let mut order: Vec<(f64, usize)> = points
-            .iter()
-            .enumerate()
-            .filter(|(i, p)| p.iter().all(|v| v.is_finite()) && *i < inliers.len())
-            .map(|(i, p)| ((p[1] - centre[1]).atan2(p[0] - centre[0]), i))
-            .collect();
+        // Sized for every point: a filtered collect would grow it by
+        // reallocations.
+        let mut order: Vec<(f64, usize)> = Vec::with_capacity(points.len());
+        order.extend(
+            points
+                .iter()
+                .enumerate()
+                .filter(|(i, p)| p.iter().all(|v| v.is_finite()) && *i < inliers.len())
+                .map(|(i, p)| ((p[1] - centre[1]).atan2(p[0] - centre[0]), i)),
+        );
         let m = order.len();
         if m < 8 {
             return None;

@@ -272,12 +272,14 @@ impl Fitter {
             .map(|(&inlier, &beside)| inlier && !beside)
             .collect();
         let inliers = fitted.inliers.iter().filter(|&&k| k).count();
-        let kept: Vec<[f64; 2]> = points_px
-            .iter()
-            .zip(&keep)
-            .filter(|(_, k)| **k)
-            .map(|(p, _)| *p)
-            .collect();
+        let mut kept: Vec<[f64; 2]> = Vec::with_capacity(inliers);
+        kept.extend(
+            points_px
+                .iter()
+                .zip(&keep)
+                .filter(|(_, k)| **k)
+                .map(|(p, _)| *p),
+        );
         if kept.len() == inliers || 2 * kept.len() < inliers {
             return fitted;
         }
@@ -337,9 +339,9 @@ pub(crate) struct Points {
 
 impl Points {
     fn new(points_px: &[[f64; 2]]) -> Result<Self, FitError> {
-        let index: Vec<usize> = (0..points_px.len())
-            .filter(|&i| points_px[i].iter().all(|c| c.is_finite()))
-            .collect();
+        // Sized for every point (a filtered collect grows by reallocations).
+        let mut index: Vec<usize> = Vec::with_capacity(points_px.len());
+        index.extend((0..points_px.len()).filter(|&i| points_px[i].iter().all(|c| c.is_finite())));
         if index.len() < 5 {
             return Err(FitError::TooFewPoints(index.len()));
         }
