@@ -139,11 +139,19 @@ fn edge_offset(grey: &AcrossProfile, polarity: Polarity) -> Option<f64> {
         *g = sign * f64::from(grey[i + 2 * STEPS_PER_PX] - grey[i]) / 2.0;
     }
     let found = match polarity {
-        Polarity::Brightening | Polarity::CanopyEnd => gradient
-            .iter()
-            .enumerate()
-            .max_by(|a, b| a.1.total_cmp(b.1))
-            .map(|(i, &g)| (i, g)),
+        // The last of the greatest, as `max_by` with `total_cmp` gives it.
+        // A plain comparison orders the values the same way wherever the
+        // answer can be an edge (at least MIN_EDGE_GREY_PER_PX: no zero of
+        // either sign, no NaN from 8-bit grey levels), and is cheaper.
+        Polarity::Brightening | Polarity::CanopyEnd => {
+            let mut best = (0, gradient[0]);
+            for (i, &g) in gradient.iter().enumerate().skip(1) {
+                if g >= best.1 {
+                    best = (i, g);
+                }
+            }
+            Some(best)
+        }
         Polarity::Darkening => (0..SEARCH_STEPS).rev().find_map(|i| {
             let g = gradient[i];
             let peak =
@@ -676,20 +684,30 @@ impl SmearedRim {
                 .filter(|(_, w)| w.is_finite())
                 .map(|(p, &w)| (p, w))
         };
-        let mut sorted: Vec<f64> = Vec::with_capacity(widths.len());
-        sorted.extend(finite().map(|(_, w)| w));
-        let limit_px = match percentiles(&mut sorted, [0.1, 0.9]) {
-            Some([sharp, wide]) if wide - sharp >= Self::MIN_BLUR_PX => {
-                sharp + 0.5 * (wide - sharp)
+        // The percentiles lie between the least and the greatest width: when
+        // those are closer than a blur, so are the percentiles, and no
+        // selection is needed to know there is none.
+        let (least, greatest) = finite()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), (_, w)| {
+                (lo.min(w), hi.max(w))
+            });
+        let mut limit_px = f64::INFINITY;
+        if greatest - least >= Self::MIN_BLUR_PX {
+            let mut sorted: Vec<f64> = Vec::with_capacity(widths.len());
+            sorted.extend(finite().map(|(_, w)| w));
+            if let Some([sharp, wide]) = percentiles(&mut sorted, [0.1, 0.9])
+                && wide - sharp >= Self::MIN_BLUR_PX
+            {
+                limit_px = sharp + 0.5 * (wide - sharp);
             }
-            _ => f64::INFINITY,
-        };
+        }
         // Without a blur no point is ever looked up: the angles (an atan2
         // a point) and their sort are only taken when there is one.
         let mut by_angle: Vec<(f64, f64)> = Vec::new();
         if limit_px.is_finite() {
-            by_angle.reserve_exact(sorted.len());
-            by_angle.extend(finite().map(|(p, w)| ((p[1] - centre[1]).atan2(p[0] - centre[0]), w)));
+            let angle = |p: &[f64; 2]| (p[1] - centre[1]).atan2(p[0] - centre[0]);
+            by_angle.reserve_exact(widths.len());
+            by_angle.extend(finite().map(|(p, w)| (angle(p), w)));
             by_angle.sort_by(|a, b| a.0.total_cmp(&b.0));
         }
         Self {
