@@ -4,6 +4,7 @@
 //! replay, and a replayed log reproduces its detections exactly.
 
 pub mod ambiguity;
+mod angles;
 pub mod detect;
 pub mod ellipse;
 pub mod fit;

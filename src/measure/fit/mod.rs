@@ -17,8 +17,6 @@ mod ransac;
 pub mod synth;
 mod taubin;
 
-pub(crate) use guard::sort_by_angle;
-
 use super::ellipse::Ellipse;
 use serde::{Deserialize, Serialize};
 

@@ -175,7 +175,7 @@ fn neighbour_inflation(along: &mut [(f64, f64)]) -> f64 {
         return 1.0;
     }
     // As a stable sort, cheaper for points that come round the rim in order.
-    crate::measure::fit::sort_by_angle(along);
+    crate::measure::angles::sort_by_angle(along);
     let mut gaps: Vec<f64> = along.windows(2).map(|w| w[1].0 - w[0].0).collect();
     // The median by selection: the order of the other gaps is never used.
     let mid = gaps.len() / 2;
