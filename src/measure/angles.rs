@@ -1,6 +1,7 @@
 //! Angles about a centre: rim points put in angular order, shared by the
-//! fit's guard against hidden stretches and the covariance's neighbour
-//! correlation (both walk the rim in order).
+//! detector's fill test (its nearest-step lookup), the fit's guard against
+//! hidden stretches and the covariance's neighbour correlation (both walk
+//! the rim in order).
 
 /// Sorts `(angle, item)` pairs that are in their points' order by angle,
 /// exactly as a stable `sort_by` on the angle would. Rim points come in the

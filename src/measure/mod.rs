@@ -11,6 +11,7 @@ pub mod fit;
 mod inverse_iteration;
 pub mod mount;
 pub mod pose;
+mod stats;
 pub mod track;
 
 use crate::camera::CameraModel;

@@ -36,6 +36,7 @@ mod tests;
 mod verify;
 
 use super::ellipse::Ellipse;
+use super::stats::median;
 use crate::camera::CameraModel;
 use coarse::{Blob, BlobFinder, Decimated, LocalContrast};
 use image::GrayImage;
@@ -355,14 +356,6 @@ fn ray_directions(n: usize) -> impl Iterator<Item = [f64; 2]> {
         Some([x * c - y * s, x * s + y * c])
     })
     .take(n)
-}
-
-fn median(values: &mut [f64]) -> f64 {
-    if values.is_empty() {
-        return 0.0;
-    }
-    let mid = values.len() / 2;
-    *values.select_nth_unstable_by(mid, f64::total_cmp).1
 }
 
 impl Detector {

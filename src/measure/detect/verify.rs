@@ -843,8 +843,9 @@ impl Detector {
                 .iter()
                 .map(|&(p, levels)| ((p[1] - ellipse.cy).atan2(p[0] - ellipse.cx), levels)),
         );
-        // The fill test looks each direction up by angle.
-        fill_steps.sort_by(|a, b| a.0.total_cmp(&b.0));
+        // The fill test looks each direction up by angle (the steps come
+        // round the rim in ray order: mostly a rotation, not a sort).
+        crate::measure::angles::sort_by_angle(&mut fill_steps);
         let fill = self.fill_share(image, &ellipse, &fill_steps);
         if fill < self.cfg.min_fill {
             return Err(Reject::LightInside(fill));

@@ -174,9 +174,7 @@ impl<'a> RimOrder<'a> {
         let gaps: Vec<f64> = (0..m)
             .map(|j| wrap_gap(order[(j + 1) % m].0 - order[j].0))
             .collect();
-        // The median by selection: the order of the other gaps is never used.
-        let mut scratch = gaps.clone();
-        let median_gap = *scratch.select_nth_unstable_by(m / 2, f64::total_cmp).1;
+        let median_gap = crate::measure::stats::median(&mut gaps.clone());
         Some(Self {
             order,
             gaps,
@@ -195,9 +193,7 @@ impl<'a> RimOrder<'a> {
             .iter()
             .map(|&(_, i)| (points[i][0] - centre[0]).hypot(points[i][1] - centre[1]))
             .collect();
-        let mid = radii.len() / 2;
-        let median_radius = *radii.select_nth_unstable_by(mid, f64::total_cmp).1;
-        let spacing_px = self.median_gap * median_radius;
+        let spacing_px = self.median_gap * crate::measure::stats::median(&mut radii);
         if spacing_px.is_nan() || spacing_px <= 0.0 {
             return 1;
         }

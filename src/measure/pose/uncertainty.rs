@@ -177,9 +177,7 @@ fn neighbour_inflation(along: &mut [(f64, f64)]) -> f64 {
     // As a stable sort, cheaper for points that come round the rim in order.
     crate::measure::angles::sort_by_angle(along);
     let mut gaps: Vec<f64> = along.windows(2).map(|w| w[1].0 - w[0].0).collect();
-    // The median by selection: the order of the other gaps is never used.
-    let mid = gaps.len() / 2;
-    let max_gap = 3.0 * *gaps.select_nth_unstable_by(mid, f64::total_cmp).1;
+    let max_gap = 3.0 * crate::measure::stats::median(&mut gaps);
     let (mut cross, mut pairs) = (0.0, 0usize);
     for w in along.windows(2) {
         if w[1].0 - w[0].0 <= max_gap {
