@@ -95,7 +95,7 @@ fn main() {
         None => println!("truth: no drogue"),
     }
     match (&m.detection, &truth) {
-        (None, _) => println!("measured: not detected"),
+        (None, _) => println!("measured: {}", sweep::not_detected(&m)),
         (Some(d), t) => {
             let e = &d.ellipse_px;
             println!(

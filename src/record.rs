@@ -2,6 +2,7 @@
 //! the MCAP `/drogue/detection` topic (ARCHITECTURE.md section 5).
 
 use crate::measure::ellipse::Ellipse;
+use crate::measure::miss::NotDetectedRecord;
 use crate::measure::{Disambiguation, FitQuality, Measurement, StageTimes};
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
@@ -49,6 +50,10 @@ pub struct DetectionRecord {
     /// Processing time of each stage, microseconds (left out when unknown).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub times_us: Option<StageTimes>,
+    /// Why no drogue was found (reason code, the reason in words, candidates
+    /// tried); left out when one was, or the frame could not be read.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub not_detected: Option<NotDetectedRecord>,
     /// Only when the frame could not be read.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub error: Option<String>,
@@ -89,6 +94,7 @@ impl DetectionRecord {
             track_epoch: d.map(|d| d.track_epoch),
             capture_time_ns: Some(m.capture_time_ns),
             times_us: Some(m.times),
+            not_detected: m.miss.as_ref().map(NotDetectedRecord::from),
             error: None,
         }
     }
@@ -113,6 +119,7 @@ impl DetectionRecord {
             track_epoch: None,
             capture_time_ns: None,
             times_us: None,
+            not_detected: None,
             error: Some(error),
         }
     }

@@ -311,6 +311,7 @@ pub fn measurement(seq: u64, capture_time_ns: u64, detection: Option<Detection>)
         seq,
         capture_time_ns,
         detection,
+        miss: None,
         tracked: false,
         times: StageTimes::default(),
     }

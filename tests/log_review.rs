@@ -63,6 +63,19 @@ fn review_counts_rates_latencies_link_and_errors_by_range() {
     let span_s = (s::time_ns(FRAMES - 1) - s::time_ns(0)) as f64 * 1e-9;
     assert!((r.duration_s() - span_s).abs() < 1e-9);
     assert!((r.detection_rate() - detected as f64 / n as f64).abs() < 1e-12);
+    // The frames without a drogue, by the reason each record gave.
+    let mut reasons = std::collections::BTreeMap::new();
+    for seq in logged_seqs().filter(|s| s.is_multiple_of(5)) {
+        *reasons
+            .entry(s::miss_reason(seq).code().to_string())
+            .or_insert(0u64) += 1;
+    }
+    assert_eq!(r.missed_by_reason, reasons);
+    assert!(
+        r.to_string()
+            .contains("not detected: blurred 6, no_canopy 6"),
+        "{r}"
+    );
 
     // Latency and processing percentiles against the values written.
     let latencies: Vec<f64> = logged_seqs().map(s::latency_ms).collect();

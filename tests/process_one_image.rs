@@ -100,3 +100,58 @@ fn one_image_needs_a_camera_and_leaves_no_files() {
     assert!(err.contains("needs --camera"), "{err}");
     assert!(!out_path.exists());
 }
+
+/// A frame without a drogue says why in its record (`not_detected`: the
+/// reason's code, its words, the candidates tried); a frame with one has no
+/// such field. Truth: a uniform sky has nothing dark in it (no candidate),
+/// and the simulator's frame holds the drogue.
+#[test]
+fn a_frame_without_a_drogue_says_why_in_its_record() {
+    let dir = tempfile::tempdir().unwrap();
+    let frames = dir.path().join("frames");
+    let sim = bin()
+        .args(["sim", "--scenario", "approach", "--frames", "1", "--out"])
+        .arg(&frames)
+        .output()
+        .unwrap();
+    assert!(sim.status.success());
+    let drogue = std::fs::read_dir(&frames)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .find(|p| p.extension().is_some_and(|e| e == "png"))
+        .unwrap();
+    let (w, h) = image::image_dimensions(&drogue).unwrap();
+    image::GrayImage::from_pixel(w, h, image::Luma([170]))
+        .save(frames.join("sky.png"))
+        .unwrap();
+    let out = dir.path().join("out.jsonl");
+    let run = bin()
+        .arg("process")
+        .arg(&frames)
+        .arg("--independent")
+        .arg("--camera")
+        .arg(frames.join("camera.yaml"))
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let records = read_json_lines(&out);
+    let sky = records.iter().find(|r| r["frame"] == "sky.png").unwrap();
+    assert_eq!(sky["detected"], false);
+    assert_eq!(sky["not_detected"]["reason"], "no_candidate", "{sky}");
+    assert_eq!(sky["not_detected"]["candidates"], 0);
+    assert!(
+        sky["not_detected"]["detail"]
+            .as_str()
+            .unwrap()
+            .contains("dark")
+    );
+    let found = records.iter().find(|r| r["frame"] != "sky.png").unwrap();
+    assert_eq!(found["detected"], true, "{found}");
+    assert!(found.get("not_detected").is_none(), "{found}");
+}

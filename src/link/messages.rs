@@ -497,6 +497,7 @@ pub(crate) mod tests {
             seq: 7,
             capture_time_ns: 1_700_000_000_123_456_789,
             detection: Some(det),
+            miss: None,
             tracked: false,
             times: StageTimes::default(),
         }

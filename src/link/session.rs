@@ -126,6 +126,7 @@ mod tests {
                 Vector3::new(6.0, 0.5, -0.3),
                 Vector3::new(-1.0, 0.0, 0.0),
             )),
+            miss: None,
             tracked: false,
             times: StageTimes::default(),
         };

@@ -9,6 +9,7 @@ pub mod detect;
 pub mod ellipse;
 pub mod fit;
 mod inverse_iteration;
+pub mod miss;
 pub mod mount;
 pub mod pose;
 mod stats;
@@ -18,6 +19,7 @@ use crate::camera::CameraModel;
 use crate::frame::Frame;
 use crate::spatial::{BodyFrd, Direction, Point};
 use ellipse::Ellipse;
+use miss::{MissReason, NotDetected};
 use nalgebra::Matrix3;
 use serde::{Deserialize, Serialize};
 use std::time::Instant;
@@ -186,6 +188,9 @@ pub struct Measurement {
     pub capture_time_ns: u64,
     /// The drogue, when one was found.
     pub detection: Option<Detection>,
+    /// Why not, when none was (`None` also where no reason is known, as in
+    /// measurements made up by tests).
+    pub miss: Option<NotDetected>,
     /// The search was limited to a region around the predicted ellipse.
     pub tracked: bool,
     /// Time spent on each stage.
@@ -269,11 +274,21 @@ impl Measurer {
         let tracked = hint.is_some();
 
         let t = Instant::now();
-        let candidate = self.detector.detect(&frame.image, hint.as_ref());
+        let candidate = self.detector.detect_explained(&frame.image, hint.as_ref());
         times.detect_us = micros_since(t);
-        if candidate.is_none() {
-            tracing::debug!(seq = frame.seq, tracked, "not detected: no rim candidate");
+        if let Err(miss) = &candidate {
+            tracing::debug!(
+                seq = frame.seq,
+                tracked,
+                reason = miss.reason.code(),
+                candidates = miss.candidates,
+                "not detected: {}",
+                miss.reason
+            );
         }
+        // A candidate found and then refused by the measurement.
+        let candidates = self.detector.candidates_tried();
+        let refused = |reason: MissReason| NotDetected { reason, candidates };
 
         let detection = candidate.and_then(|cand| {
             let t = Instant::now();
@@ -286,7 +301,7 @@ impl Measurer {
                         rim_points = undistorted.len(),
                         "not detected: ellipse fit refused: {e}"
                     );
-                    return None;
+                    return Err(refused(MissReason::FitRefused(e.to_string())));
                 }
             };
             // The points beside the probe, the hose or a glare streak are
@@ -302,7 +317,7 @@ impl Measurer {
                     fitted_axes_px = ?[fitted.ellipse.a, fitted.ellipse.b],
                     "not detected: the fit is not the rim the detector verified (undistorted px)"
                 );
-                return None;
+                return Err(refused(MissReason::FitNotTheRim));
             }
 
             let t = Instant::now();
@@ -310,7 +325,7 @@ impl Measurer {
                 pose::cone_pose(&fitted.ellipse, &self.camera, self.drogue.inner_radius_m)
             else {
                 tracing::debug!(seq = frame.seq, "not detected: no pose from the ellipse");
-                return None;
+                return Err(refused(MissReason::NoPose));
             };
             // Where a motion blur smears the disc's rim (its steps' widths),
             // the canopy's rim is smeared too.
@@ -334,7 +349,7 @@ impl Measurer {
                     score = cand.score,
                     "not detected: a weak candidate whose tilted canopy rim cannot be judged"
                 );
-                return None;
+                return Err(refused(MissReason::WeakUnjudged));
             }
             let choice = self.tracker.choose(
                 [first, second],
@@ -402,7 +417,7 @@ impl Measurer {
                 range_m = position_body_m.norm(),
                 "detected"
             );
-            Some(Detection {
+            Ok(Detection {
                 ellipse_px: fitted.ellipse,
                 pose_camera: choice.pose,
                 alt_pose_camera: choice.alternative,
@@ -422,14 +437,19 @@ impl Measurer {
                 inliers: fitted.inliers,
             })
         });
-        if detection.is_none() {
+        if detection.is_err() {
             self.tracker.lost(frame.capture_time_ns);
         }
         times.total_us = micros_since(start);
+        let (detection, miss) = match detection {
+            Ok(d) => (Some(d), None),
+            Err(miss) => (None, Some(miss)),
+        };
         Measurement {
             seq: frame.seq,
             capture_time_ns: frame.capture_time_ns,
             detection,
+            miss,
             tracked,
             times,
         }

@@ -37,6 +37,9 @@ pub struct PipelineMeters {
     last_range_bits: AtomicU64,
     /// Capture → send of the last pose, ms, as f64 bits (0: none yet).
     last_latency_bits: AtomicU64,
+    /// Why the last frame measured had no drogue (`MissReason::code`);
+    /// `None` when it had one.
+    last_miss: Mutex<Option<&'static str>>,
     /// CPU time spent inside the source (rendering, decoding), ns.
     source_cpu_ns: AtomicU64,
     /// The measurement thread's own CPU time so far, ns.
@@ -73,6 +76,19 @@ impl PipelineMeters {
         if let Some(t) = thread_cpu_ns() {
             self.measure_cpu_ns.store(t, Ordering::Relaxed);
         }
+    }
+
+    /// Called by the measurement thread after each frame: why it had no
+    /// drogue (`None`: it had one, or no reason is known).
+    pub fn set_last_miss(&self, reason: Option<&'static str>) {
+        if let Ok(mut last) = self.last_miss.lock() {
+            *last = reason;
+        }
+    }
+
+    /// Why the last frame measured had no drogue.
+    pub fn last_miss(&self) -> Option<&'static str> {
+        self.last_miss.lock().ok().and_then(|last| *last)
     }
 
     pub fn set_latency_ms(&self, ms: f64) {

@@ -1,6 +1,6 @@
 //! What `run` says while it runs: on a terminal, one status line redrawn
-//! about once a second (frames, detected, range, latency, link state, log
-//! size); otherwise (systemd, a pipe) a plain `tracing` line every 10 s.
+//! about once a second (frames, detected, why the last frame missed while
+//! it does, range, latency, link state, log size); otherwise (systemd, a pipe) a plain `tracing` line every 10 s.
 //! Colours only on a terminal, and never with `NO_COLOR` set
 //! (<https://no-color.org>).
 //!
@@ -59,6 +59,10 @@ fn status_text(vitals: &PipelineMeters, link: &LinkHandle, log_bytes: u64, colou
     let range = vitals
         .range_m()
         .map_or("range -".to_string(), |r| format!("range {r:.2} m"));
+    // Why the last frame had no drogue, while the misses go on.
+    let miss = vitals
+        .last_miss()
+        .map_or(String::new(), |why| format!(", last miss {why}"));
     let latency = vitals
         .latency_ms()
         .map_or("latency -".to_string(), |l| format!("latency {l:.1} ms"));
@@ -75,7 +79,7 @@ fn status_text(vitals: &PipelineMeters, link: &LinkHandle, log_bytes: u64, colou
         state
     };
     format!(
-        "frames {frames}, detected {detected} ({pct:.1} %), {range}, {latency}, link {state}, log {:.1} MB",
+        "frames {frames}, detected {detected} ({pct:.1} %){miss}, {range}, {latency}, link {state}, log {:.1} MB",
         log_bytes as f64 / 1e6
     )
 }
@@ -228,6 +232,13 @@ mod tests {
             plain,
             "frames 30, detected 15 (75.0 %), range 12.35 m, latency 4.3 ms, link never opened, log 2.5 MB"
         );
+        v.set_last_miss(Some("blurred"));
+        assert!(
+            status_text(&v, &link, 0, false).contains("detected 15 (75.0 %), last miss blurred,"),
+            "{}",
+            status_text(&v, &link, 0, false)
+        );
+        v.set_last_miss(None);
         let coloured = status_text(&v, &link, 0, true);
         assert!(
             coloured.contains("\x1b[31mnever opened\x1b[0m"),

@@ -41,6 +41,7 @@ pub fn spawn_measurement(
                 .as_ref()
                 .map(|d| d.position_body_m.norm());
             meters.frame_measured(range);
+            meters.set_last_miss(measured.measurement.miss.as_ref().map(|m| m.reason.code()));
         }
     });
     (tx, handle)

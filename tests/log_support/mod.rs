@@ -9,6 +9,7 @@ use drogue_vision::frame::{Frame, FrameOrigin};
 use drogue_vision::link::LinkEvent;
 use drogue_vision::log::{FlightLog, LogConfig, LogHandle, MountTransforms, Storage, StorageFile};
 use drogue_vision::measure::ellipse::Ellipse;
+use drogue_vision::measure::miss::{MissReason, NotDetected};
 use drogue_vision::measure::{Detection, FitQuality, Measurement, StageTimes};
 use drogue_vision::record::DetectionRecord;
 use drogue_vision::spatial::Point;
@@ -116,6 +117,10 @@ pub fn measurement(seq: u64) -> Measurement {
             ..testing::detection(body(centre), body(normal), 1)
         }
     });
+    let miss = detection.is_none().then(|| NotDetected {
+        reason: miss_reason(seq),
+        candidates: 3,
+    });
     Measurement {
         tracked: seq > 0,
         times: StageTimes {
@@ -124,7 +129,18 @@ pub fn measurement(seq: u64) -> Measurement {
             pose_us: 100,
             total_us: 1600 + (seq as u32 % 10) * 100,
         },
+        miss,
         ..testing::measurement(seq, time_ns(seq), detection)
+    }
+}
+
+/// Why frame `seq` of [`measurement`] (a multiple of 5) has no drogue: no
+/// canopy on multiples of 10, blurred on the others.
+pub fn miss_reason(seq: u64) -> MissReason {
+    if seq.is_multiple_of(10) {
+        MissReason::NoCanopy(0.1)
+    } else {
+        MissReason::Blurred(0.6)
     }
 }
 

@@ -192,6 +192,13 @@ fn score(stats: &mut LevelStats, m: &Measurement, truth: Option<&DrogueTruth>) {
     stats.normal_deg.push(normal_deg);
 }
 
+/// "not detected", with the measurement's reason when it has one.
+pub fn not_detected(m: &Measurement) -> String {
+    m.miss.as_ref().map_or("not detected".to_string(), |miss| {
+        format!("not detected ({}: {})", miss.reason.code(), miss.reason)
+    })
+}
+
 /// One line per frame on stderr (`SWEEP_TRACE` set): the truth's ellipse,
 /// range and tilt, and what the measurement gave, for studying misses.
 fn trace_frame(label: &str, index: u64, m: &Measurement, truth: Option<&DrogueTruth>) {
@@ -201,16 +208,13 @@ fn trace_frame(label: &str, index: u64, m: &Measurement, truth: Option<&DrogueTr
             t.ellipse.cx, t.ellipse.cy, t.ellipse.a, t.ellipse.b, t.range_m, t.tilt_deg
         )
     });
-    let found = m
-        .detection
-        .as_ref()
-        .map_or("not detected".to_string(), |d| {
-            let e = &d.ellipse_px;
-            format!(
-                "found centre ({:.1}, {:.1}) axes {:.1}/{:.1} {:?}",
-                e.cx, e.cy, e.a, e.b, d.disambiguation
-            )
-        });
+    let found = m.detection.as_ref().map_or(not_detected(m), |d| {
+        let e = &d.ellipse_px;
+        format!(
+            "found centre ({:.1}, {:.1}) axes {:.1}/{:.1} {:?}",
+            e.cx, e.cy, e.a, e.b, d.disambiguation
+        )
+    });
     eprintln!("{label} {index:03}: {truth}; {found}");
 }
 

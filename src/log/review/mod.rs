@@ -215,6 +215,9 @@ fn review_into(log: &Path, out_dir: &Path) -> Result<ReviewReport, LogError> {
                 r.measurements += 1;
                 if d.detected {
                     r.detected += 1;
+                } else {
+                    let reason = d.not_detected.as_ref().map_or("unknown", |n| &n.reason);
+                    *r.missed_by_reason.entry(reason.to_string()).or_default() += 1;
                 }
                 let processing = d.times_us.as_ref().map(|x| x.total_us / 1000.0);
                 if let Some(p) = processing {

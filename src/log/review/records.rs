@@ -12,6 +12,14 @@ pub(super) struct DetectionLite {
     pub(super) normal_camera: Option<[f64; 3]>,
     pub(super) position_body: Option<[f64; 3]>,
     pub(super) times_us: Option<TimesLite>,
+    /// Absent in logs written before records said why.
+    pub(super) not_detected: Option<NotDetectedLite>,
+}
+
+/// The reason code of a frame without a drogue.
+#[derive(Deserialize)]
+pub(super) struct NotDetectedLite {
+    pub(super) reason: String,
 }
 
 #[derive(Deserialize)]

@@ -68,6 +68,9 @@ pub struct ReviewReport {
     pub measurements: u64,
     /// Of those, frames with a drogue detected.
     pub detected: u64,
+    /// The others, by the reason their records give (`not_detected.reason`;
+    /// `unknown` in logs written before records gave one).
+    pub missed_by_reason: BTreeMap<String, u64>,
     /// Measurement time per frame, ms.
     pub processing_ms: Histogram,
     /// Capture to pose sent, ms (when the log has it).
@@ -200,6 +203,12 @@ impl fmt::Display for ReviewReport {
             self.measurements,
             100.0 * self.detection_rate()
         )?;
+        if !self.missed_by_reason.is_empty() {
+            let mut by_count: Vec<(&String, &u64)> = self.missed_by_reason.iter().collect();
+            by_count.sort_by(|a, b| b.1.cmp(a.1).then(a.0.cmp(b.0)));
+            let list: Vec<String> = by_count.iter().map(|(r, n)| format!("{r} {n}")).collect();
+            writeln!(f, "           not detected: {}", list.join(", "))?;
+        }
         writeln!(f, "processing {}", percentiles(&self.processing_ms))?;
         if self.source_clock {
             writeln!(

@@ -36,6 +36,7 @@ mod tests;
 mod verify;
 
 use super::ellipse::Ellipse;
+use super::miss::{MissReason, NotDetected};
 use super::stats::median;
 use crate::camera::CameraModel;
 use coarse::{Blob, BlobFinder, Decimated, LocalContrast};
@@ -287,6 +288,59 @@ enum Reject {
     TooSmall(f64),
 }
 
+impl Reject {
+    /// How far through verification a candidate got before this stopped it
+    /// (the checks' order: the rim pass, then the evidence), and what it
+    /// tells a user; `None` for a candidate already verified in another
+    /// form ([`Reject::Known`]), which says nothing of the frame.
+    fn as_miss(self) -> Option<(u8, MissReason)> {
+        Some(match self {
+            Reject::Known => return None,
+            Reject::NoRim(_) | Reject::OutOfImage => (0, MissReason::NoRim),
+            Reject::FewEdges(_) | Reject::NoEllipse | Reject::Unsettled => (1, MissReason::NoRim),
+            Reject::Implausible => (2, MissReason::Implausible),
+            Reject::FewInliers(n) => (3, MissReason::FewRimPoints(n)),
+            Reject::LowContrast(c) => (4, MissReason::LowContrast(c)),
+            Reject::LightInside(f) => (5, MissReason::LightInside(f)),
+            Reject::Blurred(s) => (6, MissReason::Blurred(s)),
+            Reject::Soft(s) => (7, MissReason::Soft(s)),
+            Reject::Nested(r) => (8, MissReason::Nested(r)),
+            Reject::NoCanopy(s) => (9, MissReason::NoCanopy(s)),
+            Reject::LowScore(s) => (10, MissReason::LowScore(s)),
+            Reject::TooSmall(px) => (11, MissReason::TooSmall(px)),
+        })
+    }
+}
+
+/// The candidates a full-frame search rejected: how many, and the one that
+/// got furthest (the first of those, in the order tried), which is the
+/// frame's reason when nothing verifies.
+#[derive(Clone, Debug, Default)]
+struct Misses {
+    candidates: u32,
+    closest: Option<(u8, MissReason)>,
+}
+
+impl Misses {
+    /// One candidate's outcome.
+    fn tried(&mut self, outcome: Result<(), Reject>) {
+        self.candidates += 1;
+        if let Err(why) = outcome
+            && let Some((rank, reason)) = why.as_miss()
+            && self.closest.as_ref().is_none_or(|(r, _)| rank > *r)
+        {
+            self.closest = Some((rank, reason));
+        }
+    }
+
+    /// The frame's reason when no candidate was kept.
+    fn reason(&self) -> MissReason {
+        self.closest
+            .as_ref()
+            .map_or(MissReason::NoCandidate, |(_, r)| r.clone())
+    }
+}
+
 /// Finds the dark inner circle. Holds scratch buffers between frames.
 #[derive(Clone)]
 pub struct Detector {
@@ -319,6 +373,8 @@ pub struct Detector {
     /// [`rim::smoothing_spread_px`] for each half-width up to
     /// [`MAX_SMOOTH_HALF`].
     smoothing_spread_px: Vec<f64>,
+    /// This frame's rejected candidates (the full-frame search's).
+    misses: Misses,
 }
 
 /// The angle between directions `a` and `b` (radians, each within a turn
@@ -386,6 +442,7 @@ impl Detector {
             smoothing_spread_px: (0..=MAX_SMOOTH_HALF.max(MAX_RAMP_SMOOTH_HALF))
                 .map(|h| rim::smoothing_spread_px(h, NARROW_STEP_PX))
                 .collect(),
+            misses: Misses::default(),
         }
     }
 
@@ -393,8 +450,30 @@ impl Detector {
     /// `hint`: the tracker's predicted ellipse (undistorted pixels); search near
     /// it first, and the full frame when it is not found there.
     pub fn detect(&mut self, image: &GrayImage, hint: Option<&Ellipse>) -> Option<RimCandidate> {
+        self.detect_explained(image, hint).ok()
+    }
+
+    /// Candidates the last [`Self::detect`]'s full-frame search verified
+    /// (0 when the frame was found at its tracked ellipse).
+    pub fn candidates_tried(&self) -> u32 {
+        self.misses.candidates
+    }
+
+    /// [`Self::detect`], with the reason when the frame shows no drogue:
+    /// that of the candidate that got furthest through verification
+    /// ([`MissReason`]), and how many were tried.
+    pub fn detect_explained(
+        &mut self,
+        image: &GrayImage,
+        hint: Option<&Ellipse>,
+    ) -> Result<RimCandidate, NotDetected> {
+        self.misses = Misses::default();
+        let miss = |misses: &Misses| NotDetected {
+            reason: misses.reason(),
+            candidates: misses.candidates,
+        };
         if image.width() < 8 || image.height() < 8 {
-            return None;
+            return Err(miss(&self.misses));
         }
         if let Some(h) = hint.filter(|h| h.a.is_finite() && h.b > 0.5 && h.a < 1e5) {
             if self.noise_age == 0 || self.noise_age >= TRACKED_NOISE_EVERY {
@@ -409,12 +488,18 @@ impl Detector {
                 self.cfg.tracked_max_rim_points,
                 RimUse::Measure,
             ) {
-                Ok(v) => return Some(v.into_candidate()),
+                Ok(v) => return Ok(v.into_candidate()),
                 Err(why) => tracing::debug!(?why, "not at the tracked ellipse: full search"),
             }
         }
         self.measure_noise(image, NOISE_ROW_STRIDE);
-        self.search_full(image).map(Verified::into_candidate)
+        match self.search_full(image) {
+            Ok(v) => Ok(v.into_candidate()),
+            Err(reason) => Err(NotDetected {
+                reason,
+                candidates: self.misses.candidates,
+            }),
+        }
     }
 
     /// Every candidate that the full-frame search verifies, with its
@@ -444,8 +529,8 @@ impl Detector {
     }
 
     /// Coarse search over the whole frame, then verification of the best
-    /// coarse candidates.
-    fn search_full(&mut self, image: &GrayImage) -> Option<Verified> {
+    /// coarse candidates; the frame's reason when none is kept.
+    fn search_full(&mut self, image: &GrayImage) -> Result<Verified, MissReason> {
         let mut verified = self.verify_candidates(image, self.cfg.accept_score);
         // The best candidate that passes again at the full density of rim
         // points: a candidate that passed on the sparse rim only by the
@@ -454,6 +539,8 @@ impl Detector {
         let measure_spacing = self.cfg.rim_point_spacing_px;
         let verify_spacing = VERIFY_SPACING_PX.max(measure_spacing);
         let max_points = self.cfg.max_rim_points;
+        // Why the best candidate failed the full density, if all did.
+        let mut first_failure: Option<Reject> = None;
         let found = verified.into_iter().find_map(|scouted| {
             match self.verify_settled(
                 image,
@@ -469,14 +556,22 @@ impl Detector {
                         ?why,
                         "the full-density rim pass failed: not the drogue"
                     );
+                    first_failure.get_or_insert(why);
                     None
                 }
             }
-        })?;
+        });
+        let Some(found) = found else {
+            // A candidate that verified got further than any rejected one.
+            return Err(match first_failure.and_then(Reject::as_miss) {
+                Some((_, why)) => MissReason::NotAtFullDensity(Box::new(why)),
+                None => self.misses.reason(),
+            });
+        };
         if measure_spacing >= verify_spacing {
-            return Some(found);
+            return Ok(found);
         }
-        Some(self.measured_densely(image, found, measure_spacing, max_points))
+        Ok(self.measured_densely(image, found, measure_spacing, max_points))
     }
 
     /// `found` with its points taken again on rays `spacing_px` apart (one

@@ -543,19 +543,25 @@ impl Detector {
             result = ?r.as_ref().map(|v| (v.score, v.canopy)),
             "candidate"
         );
-        let v = self.prefer_inner_disc(image, r?, index);
-        // Verification by the drogue's structure: a candidate too thin for
-        // its canopy rim to be judged along its minor axis rests on its
-        // darkness alone.
-        let minor_px = v.ellipse.a.min(v.ellipse.b);
-        if minor_px < canopy::smallest_judged_radius_px(self.drogue) {
-            tracing::debug!(
-                centre_px = ?[v.ellipse.cx.round(), v.ellipse.cy.round()],
-                minor_px,
-                "too thin for its canopy rim to be judged: not the drogue"
-            );
-            return Err(Reject::TooSmall(minor_px));
-        }
+        let kept = r.and_then(|v| {
+            let v = self.prefer_inner_disc(image, v, index);
+            // Verification by the drogue's structure: a candidate too thin
+            // for its canopy rim to be judged along its minor axis rests on
+            // its darkness alone.
+            let minor_px = v.ellipse.a.min(v.ellipse.b);
+            if minor_px < canopy::smallest_judged_radius_px(self.drogue) {
+                tracing::debug!(
+                    centre_px = ?[v.ellipse.cx.round(), v.ellipse.cy.round()],
+                    minor_px,
+                    "too thin for its canopy rim to be judged: not the drogue"
+                );
+                return Err(Reject::TooSmall(minor_px));
+            }
+            Ok(v)
+        });
+        self.misses
+            .tried(kept.as_ref().map(|_| ()).map_err(|why| *why));
+        let v = kept?;
         let ends = ends_search(&v, accept);
         verified.push(v);
         Ok(ends)

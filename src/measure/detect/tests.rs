@@ -1247,3 +1247,57 @@ fn a_candidate_its_canopy_confirms_ends_the_search() {
 fn scores(verified: &[Verified]) -> Vec<(f64, Option<f64>)> {
     verified.iter().map(|v| (v.score, v.canopy)).collect()
 }
+
+/// A frame without the drogue says why, as the candidate that came closest
+/// failed: nothing dark in a clear sky is no candidate; a dark disc without
+/// its canopy has none.
+#[test]
+fn a_frame_without_the_drogue_says_why() {
+    use crate::measure::miss::MissReason;
+    let (w, h) = (400, 300);
+    let cam = camera(w, h);
+    let why = |img: &GrayImage| match detector(&cam).detect_explained(img, None) {
+        Ok(c) => panic!("detected at {:?}", c.ellipse_px),
+        Err(miss) => miss,
+    };
+    let mut sky = Scene::new(Ellipse::new(0.0, 0.0, 0.0, 0.0, 0.0));
+    sky.with_canopy = false;
+    let clear = why(&sky.render(w, h, 2.0, 21));
+    assert_eq!(
+        (clear.reason.clone(), clear.candidates),
+        (MissReason::NoCandidate, 0)
+    );
+
+    let mut bare = Scene::new(Ellipse::new(190.0, 140.0, 36.0, 30.0, 0.3));
+    bare.with_canopy = false;
+    let miss = why(&bare.render(w, h, 2.0, 12));
+    assert!(matches!(miss.reason, MissReason::NoCanopy(_)), "{miss:?}");
+    assert!(miss.candidates > 0);
+}
+
+/// The reason kept is the furthest any candidate got through the checks
+/// (their order in verification), the first of equals; a candidate found
+/// again in another form says nothing, and a kept one counts as tried.
+#[test]
+fn the_reason_is_the_candidate_that_got_furthest() {
+    use super::{Misses, Reject};
+    use crate::measure::miss::MissReason;
+    let mut m = Misses::default();
+    assert_eq!(m.reason(), MissReason::NoCandidate);
+    for outcome in [
+        Err(Reject::NoRim(2)),
+        Err(Reject::LightInside(0.3)),
+        Err(Reject::Known),
+        Err(Reject::FewInliers(5)),
+        Err(Reject::LightInside(0.1)),
+        Ok(()),
+    ] {
+        m.tried(outcome);
+    }
+    assert_eq!(m.candidates, 6);
+    assert_eq!(m.reason(), MissReason::LightInside(0.3));
+    m.tried(Err(Reject::Blurred(0.6)));
+    assert_eq!(m.reason(), MissReason::Blurred(0.6));
+    m.tried(Err(Reject::NoCanopy(0.2)));
+    assert_eq!(m.reason(), MissReason::NoCanopy(0.2));
+}
