@@ -147,6 +147,12 @@ fn main() -> ExitCode {
                     "{} frames, {} detected, {} unreadable, {} other files skipped, {:.2} ms per frame",
                     s.frames, s.detected, s.unreadable, s.skipped, s.ms_per_frame
                 );
+                if !s.missed_by_reason.is_empty() {
+                    eprintln!(
+                        "not detected: {}",
+                        drogue_vision::measure::miss::counts_line(&s.missed_by_reason)
+                    );
+                }
                 if s.oversized_records > 0 {
                     eprintln!(
                         "{} MCAP records above the {} MiB record bound skipped unread \

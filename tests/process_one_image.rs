@@ -140,6 +140,11 @@ fn a_frame_without_a_drogue_says_why_in_its_record() {
         "{}",
         String::from_utf8_lossy(&run.stderr)
     );
+    let summary = String::from_utf8_lossy(&run.stderr);
+    assert!(
+        summary.contains("not detected: no_candidate 1"),
+        "{summary}"
+    );
     let records = read_json_lines(&out);
     let sky = records.iter().find(|r| r["frame"] == "sky.png").unwrap();
     assert_eq!(sky["detected"], false);

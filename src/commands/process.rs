@@ -65,6 +65,9 @@ pub struct ProcessSummary {
     pub frames: usize,
     /// Frames with a drogue detected.
     pub detected: usize,
+    /// The readable frames without one, by the reason their records give
+    /// (`not_detected.reason`).
+    pub missed_by_reason: std::collections::BTreeMap<String, u64>,
     /// Frames that could not be read or decoded (their lines carry `error`).
     pub unreadable: usize,
     /// Non-image files in the folder, not read.
@@ -320,6 +323,12 @@ pub fn run(args: &ProcessArgs) -> Result<ProcessSummary, ProcessError> {
                 let measured = stage.measure(&frame, name);
                 measure_time += t.elapsed();
                 summary.detected += usize::from(measured.measurement.detection.is_some());
+                if let Some(miss) = &measured.measurement.miss {
+                    *summary
+                        .missed_by_reason
+                        .entry(miss.reason.code().to_string())
+                        .or_default() += 1;
+                }
                 measured.record
             }
         };

@@ -161,6 +161,15 @@ impl From<&NotDetected> for NotDetectedRecord {
     }
 }
 
+/// Misses counted by reason code, most first (then by code): `no_canopy
+/// 6, blurred 4`, as `process` and `review` print them.
+pub fn counts_line(counts: &std::collections::BTreeMap<String, u64>) -> String {
+    let mut by_count: Vec<(&String, &u64)> = counts.iter().collect();
+    by_count.sort_by(|a, b| b.1.cmp(a.1).then(a.0.cmp(b.0)));
+    let list: Vec<String> = by_count.iter().map(|(r, n)| format!("{r} {n}")).collect();
+    list.join(", ")
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -190,6 +199,15 @@ mod tests {
         codes.sort_unstable();
         codes.dedup();
         assert_eq!(codes.len(), all.len());
+    }
+
+    #[test]
+    fn counts_are_listed_most_first_then_by_code() {
+        let counts = [("blurred", 4), ("no_canopy", 6), ("nested", 4)]
+            .into_iter()
+            .map(|(r, n)| (r.to_string(), n))
+            .collect();
+        assert_eq!(counts_line(&counts), "no_canopy 6, blurred 4, nested 4");
     }
 
     #[test]

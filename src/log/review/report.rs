@@ -204,10 +204,11 @@ impl fmt::Display for ReviewReport {
             100.0 * self.detection_rate()
         )?;
         if !self.missed_by_reason.is_empty() {
-            let mut by_count: Vec<(&String, &u64)> = self.missed_by_reason.iter().collect();
-            by_count.sort_by(|a, b| b.1.cmp(a.1).then(a.0.cmp(b.0)));
-            let list: Vec<String> = by_count.iter().map(|(r, n)| format!("{r} {n}")).collect();
-            writeln!(f, "           not detected: {}", list.join(", "))?;
+            writeln!(
+                f,
+                "           not detected: {}",
+                crate::measure::miss::counts_line(&self.missed_by_reason)
+            )?;
         }
         writeln!(f, "processing {}", percentiles(&self.processing_ms))?;
         if self.source_clock {
