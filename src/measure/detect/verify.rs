@@ -773,12 +773,14 @@ impl Detector {
         if rays_in_image < rays / 4 {
             return Err(Reject::OutOfImage);
         }
+        // A glare over much of the rim leaves few rays on the rest: that
+        // rest is looked at twice as closely (to the configured spacing at
+        // most) before the pass gives up, for too few edges or (below) too
+        // few of them on the ellipse.
+        let closer = 0.5 * spacing_px;
+        let look_closer = glares_dropped && closer >= self.cfg.rim_point_spacing_px;
         if undistorted.len() < self.cfg.min_rim_points as usize {
-            // A glare over much of the rim leaves few rays on the rest: that
-            // rest is looked at twice as closely (to the configured spacing
-            // at most) before the pass gives up.
-            let closer = 0.5 * spacing_px;
-            if glares_dropped && closer >= self.cfg.rim_point_spacing_px {
+            if look_closer {
                 return self.rim_pass_at(
                     image,
                     start,
@@ -815,6 +817,16 @@ impl Detector {
             .filter(|&i| residuals[i] <= tol)
             .collect();
         if inliers.len() < self.cfg.min_rim_points as usize {
+            if look_closer {
+                return self.rim_pass_at(
+                    image,
+                    start,
+                    closer,
+                    max_points,
+                    rim_use,
+                    GlareCover::Most,
+                );
+            }
             return Err(Reject::FewInliers(inliers.len()));
         }
         let mut inlier_contrast: Vec<f64> = inliers.iter().map(|&i| contrasts[i]).collect();
