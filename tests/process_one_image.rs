@@ -160,3 +160,46 @@ fn a_frame_without_a_drogue_says_why_in_its_record() {
     assert_eq!(found["detected"], true, "{found}");
     assert!(found.get("not_detected").is_none(), "{found}");
 }
+
+/// `run` ends its summary with the misses by reason, as `process` does:
+/// a folder of one drogue frame and two uniform skies gives
+/// `not detected: no_candidate 2`.
+#[test]
+fn run_ends_with_the_misses_by_reason() {
+    let dir = tempfile::tempdir().unwrap();
+    let frames = dir.path().join("frames");
+    let sim = bin()
+        .args(["sim", "--scenario", "approach", "--frames", "1", "--out"])
+        .arg(&frames)
+        .output()
+        .unwrap();
+    assert!(sim.status.success());
+    let drogue = std::fs::read_dir(&frames)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .find(|p| p.extension().is_some_and(|e| e == "png"))
+        .unwrap();
+    let (w, h) = image::image_dimensions(&drogue).unwrap();
+    for name in ["sky_1.png", "sky_2.png"] {
+        image::GrayImage::from_pixel(w, h, image::Luma([170]))
+            .save(frames.join(name))
+            .unwrap();
+    }
+    let run = bin()
+        .args(["run", "--fast", "--mavlink", "udpout:127.0.0.1:9"])
+        .arg("--source")
+        .arg(format!("dir:{}", frames.display()))
+        .arg("--camera")
+        .arg(frames.join("camera.yaml"))
+        .arg("--log-dir")
+        .arg(dir.path().join("logs"))
+        .output()
+        .unwrap();
+    let summary = String::from_utf8_lossy(&run.stderr);
+    assert!(run.status.success(), "{summary}");
+    assert!(summary.contains("1 detected"), "{summary}");
+    assert!(
+        summary.contains("not detected: no_candidate 2"),
+        "{summary}"
+    );
+}

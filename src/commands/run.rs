@@ -122,6 +122,14 @@ pub fn report(summary: &RunSummary) -> String {
             .map(|p| p.display().to_string())
             .collect();
         let link_line = s.link.as_ref().map_or_else(String::new, link_report);
+        let misses = if s.missed_by_reason.is_empty() {
+            String::new()
+        } else {
+            format!(
+                "\nnot detected: {}",
+                crate::measure::miss::counts_line(&s.missed_by_reason)
+            )
+        };
         let mut held = if s.vehicle_pose_held > 0 {
             format!(
                 ", {} rendered with a held autopilot pose (stale)",
@@ -162,7 +170,7 @@ pub fn report(summary: &RunSummary) -> String {
         );
         format!(
             "run {}: {} frames, {} measured, {} detected ({rate:.1} %), {} skipped (measurement busy), \
-             {} unreadable, source late {} times{held}{}{resources_line}\nlog: {}{}",
+             {} unreadable, source late {} times{held}{misses}{}{resources_line}\nlog: {}{}",
             if s.interrupted {
                 "interrupted"
             } else {

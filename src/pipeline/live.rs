@@ -79,6 +79,8 @@ pub struct RunSummary {
     pub measured: u64,
     /// Frames with a drogue detected.
     pub detected: u64,
+    /// The measured frames without one, by the reason their records give.
+    pub missed_by_reason: std::collections::BTreeMap<String, u64>,
     /// Frames not measured because the measurement was still busy.
     pub skipped: u64,
     /// Frames the source could not deliver (reported and skipped).
@@ -439,6 +441,7 @@ pub fn run(
         frames,
         measured: get(&meters.measured),
         detected: get(&meters.detected),
+        missed_by_reason: meters.missed_by_reason(),
         skipped,
         unreadable,
         source_late: late,

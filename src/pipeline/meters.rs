@@ -12,6 +12,7 @@
 use crate::link::EventReceiver;
 use crate::log::LogHandle;
 use cpu_time::{ProcessTime, ThreadTime};
+use std::collections::BTreeMap;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Condvar, Mutex};
 use std::thread::JoinHandle;
@@ -40,6 +41,8 @@ pub struct PipelineMeters {
     /// Why the last frame measured had no drogue (`MissReason::code`);
     /// `None` when it had one.
     last_miss: Mutex<Option<&'static str>>,
+    /// The frames without a drogue so far, by reason code.
+    missed_by_reason: Mutex<BTreeMap<String, u64>>,
     /// CPU time spent inside the source (rendering, decoding), ns.
     source_cpu_ns: AtomicU64,
     /// The measurement thread's own CPU time so far, ns.
@@ -84,6 +87,17 @@ impl PipelineMeters {
         if let Ok(mut last) = self.last_miss.lock() {
             *last = reason;
         }
+        if let (Some(reason), Ok(mut counts)) = (reason, self.missed_by_reason.lock()) {
+            *counts.entry(reason.to_string()).or_default() += 1;
+        }
+    }
+
+    /// The frames without a drogue so far, by reason code.
+    pub fn missed_by_reason(&self) -> BTreeMap<String, u64> {
+        self.missed_by_reason
+            .lock()
+            .map(|counts| counts.clone())
+            .unwrap_or_default()
     }
 
     /// Why the last frame measured had no drogue.
