@@ -2,11 +2,13 @@
 //! sharpness of its steps, the canopy's rim where its pose puts it, and the
 //! score that ranks the candidates.
 
-use super::verify::{CLIPPED_SHARE, FillLevels, RimPass};
+use super::shading::shaded_points;
+use super::verify::{CLIPPED_SHARE, FillLevels, PoseEdges, RimPass};
 use super::{
     Detector, Reject, SATURATED_GRAY, VEIL_MIN_GRAY, VEIL_SIGMAS, Verified, canopy, median,
     polar_radius, rim,
 };
+use crate::camera::CameraModel;
 use crate::measure::ellipse::Ellipse;
 use image::GrayImage;
 use std::f64::consts::{PI, TAU};
@@ -222,8 +224,7 @@ impl Detector {
             ellipse,
             centre,
             points_px,
-            measured_px,
-            measured_undistorted,
+            pose_edges,
             residuals,
             inliers,
             step_widths_px,
@@ -320,11 +321,12 @@ impl Detector {
             return Err(Reject::LowScore(score));
         }
         let measured = MeasuredRim::near(
+            &self.camera,
             &ellipse,
             tol,
             &residuals,
-            measured_px,
-            measured_undistorted,
+            &points_px,
+            pose_edges,
             step_widths_px,
         );
         Ok(Verified {
@@ -348,20 +350,23 @@ pub(super) struct MeasuredRim {
 }
 
 impl MeasuredRim {
-    /// The measured points of a pass (`measured_px`, `undistorted`, with
-    /// their `step_widths_px`) whose edge lies near the pass's `ellipse`
-    /// (`residuals`, its tolerance `tol`): the probe and hose outlines are
-    /// the fit's outliers, and fewer of them is better.
+    /// The points a pass gives the pose to be measured from (`pose_edges`
+    /// placed: moved for the shading and undistorted; a scouting pass's own
+    /// `points_px`), with their `step_widths_px`, whose edge lies near the
+    /// pass's `ellipse` (`residuals`, its tolerance `tol`): the probe and
+    /// hose outlines are the fit's outliers, and fewer of them is better.
+    /// Only those near are undistorted.
     pub(super) fn near(
+        camera: &CameraModel,
         ellipse: &Ellipse,
         tol: f64,
         residuals: &[f64],
-        measured_px: Vec<[f64; 2]>,
-        undistorted: Vec<[f64; 2]>,
+        points_px: &[[f64; 2]],
+        pose_edges: PoseEdges,
         step_widths_px: Vec<f64>,
     ) -> Self {
         let keep = (0.05 * ellipse.a).max(3.0 * tol);
-        fn near<T>(items: Vec<T>, residuals: &[f64], keep: f64) -> Vec<T> {
+        fn near<T>(items: impl IntoIterator<Item = T>, residuals: &[f64], keep: f64) -> Vec<T> {
             items
                 .into_iter()
                 .zip(residuals)
@@ -369,9 +374,22 @@ impl MeasuredRim {
                 .map(|(p, _)| p)
                 .collect()
         }
+        let (points_px, undistorted) = match pose_edges {
+            PoseEdges::Own(undistorted) => (
+                near(points_px.iter().copied(), residuals, keep),
+                near(undistorted, residuals, keep),
+            ),
+            PoseEdges::Shaded { base_px, shading } => {
+                // The shading's slope is the whole pass's: moved first,
+                // then picked.
+                let moved = near(shaded_points(&base_px, &shading), residuals, keep);
+                let undistorted = moved.iter().map(|&p| camera.undistort_px(p)).collect();
+                (moved, undistorted)
+            }
+        };
         Self {
-            points_px: near(measured_px, residuals, keep),
-            undistorted: near(undistorted, residuals, keep),
+            points_px,
+            undistorted,
             step_widths_px: near(step_widths_px, residuals, keep),
         }
     }

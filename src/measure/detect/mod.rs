@@ -593,11 +593,12 @@ impl Detector {
         ) {
             Ok(pass) => {
                 let measured = evidence::MeasuredRim::near(
+                    &self.camera,
                     &pass.ellipse,
                     pass.tolerance,
                     &pass.residuals,
-                    pass.measured_px,
-                    pass.measured_undistorted,
+                    &pass.points_px,
+                    pass.pose_edges,
                     pass.step_widths_px,
                 );
                 Verified {

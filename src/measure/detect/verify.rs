@@ -4,7 +4,7 @@
 
 use super::glare::{GlareCover, glare_before_step, glare_on_light_side};
 use super::search::Seed;
-use super::shading::{ShadedEdge, shaded_points};
+use super::shading::ShadedEdge;
 use super::{
     Detector, Reject, VEIL_MIN_GRAY, VEIL_SIGMAS, Verified, conic_fit, median, polar_radius,
     polar_radius_local, ray_directions, rim, smoothing_half_for_contrast, smoothing_half_for_ramp,
@@ -74,13 +74,11 @@ pub(super) struct RimPass {
     /// The rays' origin, distorted pixels.
     pub(super) centre: [f64; 2],
     pub(super) points_px: Vec<[f64; 2]>,
-    /// The same edges placed for the canopy's shading ([`shaded_points`]),
-    /// distorted pixels: the points the pose is measured from. The fit and
-    /// the evidence use `points_px`, so that what is detected does not hang
-    /// on the shading's estimate.
-    pub(super) measured_px: Vec<[f64; 2]>,
-    /// `measured_px`, undistorted.
-    pub(super) measured_undistorted: Vec<[f64; 2]>,
+    /// The edges the pose is measured from, placed only once the pass is
+    /// kept ([`super::evidence::MeasuredRim::near`]). The fit and the evidence use
+    /// `points_px`, so that what is detected does not hang on the shading's
+    /// estimate.
+    pub(super) pose_edges: PoseEdges,
     pub(super) residuals: Vec<f64>,
     pub(super) inliers: Vec<usize>,
     /// Width of each point's step (twice its edge-to-light distance),
@@ -99,6 +97,23 @@ pub(super) struct RimPass {
     /// The rim's mid level by direction (angle about the ellipse's centre,
     /// gray level), for the canopy test.
     pub(super) mids: Vec<(f64, f32)>,
+}
+
+/// The edges of a narrow pass that the pose is measured from, not yet
+/// placed: the canopy's shading's move and the undistortion wait until the
+/// pass is kept (a tracked frame's first pass is often repeated from its
+/// own ellipse, and a rejected one is never measured), and then take only
+/// the points near its ellipse.
+pub(super) enum PoseEdges {
+    /// A scouting pass's own points, undistorted (aligned with its
+    /// `points_px`).
+    Own(Vec<[f64; 2]>),
+    /// A measuring pass's edges (distorted pixels) and what moves each for
+    /// the canopy's shading ([`super::shading::shaded_points`]).
+    Shaded {
+        base_px: Vec<[f64; 2]>,
+        shading: Vec<ShadedEdge>,
+    },
 }
 
 /// What a narrow pass's points are for: comparing candidates, or measuring
@@ -863,20 +878,18 @@ impl Detector {
             return Err(Reject::LightInside(fill));
         }
         let shape = inliers.len() as f64 / rays_in_image as f64;
-        let (measured_px, measured_undistorted) = match rim_use {
-            RimUse::Measure => {
-                let moved = shaded_points(&measured_base, &shading);
-                let undistorted = moved.iter().map(|&p| self.camera.undistort_px(p)).collect();
-                (moved, undistorted)
-            }
-            RimUse::Scout => (points_px.clone(), undistorted),
+        let pose_edges = match rim_use {
+            RimUse::Measure => PoseEdges::Shaded {
+                base_px: measured_base,
+                shading,
+            },
+            RimUse::Scout => PoseEdges::Own(undistorted),
         };
         Ok(RimPass {
             ellipse,
             centre,
             points_px,
-            measured_px,
-            measured_undistorted,
+            pose_edges,
             residuals,
             inliers,
             step_widths_px: widths,
