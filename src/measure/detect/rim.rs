@@ -17,14 +17,17 @@ pub fn sample(img: &GrayImage, u: f64, v: f64) -> Option<f32> {
     if w < 2 || h < 2 || !(u >= 0.0 && v >= 0.0 && u <= (w - 1) as f64 && v <= (h - 1) as f64) {
         return None;
     }
-    // Truncation is floor here: u, v >= 0.
-    let x0 = (u as usize).min(w - 2);
-    let y0 = (v as usize).min(h - 2);
+    // Truncation is floor here: u, v >= 0. Through `u32` (the image's
+    // sides are): a cheaper saturating conversion than to `usize`.
+    let x0 = (u as u32 as usize).min(w - 2);
+    let y0 = (v as u32 as usize).min(h - 2);
     let raw = img.as_raw();
     let (fx, fy) = ((u - x0 as f64) as f32, (v - y0 as f64) as f32);
     let i = y0 * w + x0;
-    let (p00, p10) = (f32::from(raw[i]), f32::from(raw[i + 1]));
-    let (p01, p11) = (f32::from(raw[i + w]), f32::from(raw[i + w + 1]));
+    // One bounds check for the four pixels.
+    let quad = &raw[i..i + w + 2];
+    let (p00, p10) = (f32::from(quad[0]), f32::from(quad[1]));
+    let (p01, p11) = (f32::from(quad[w]), f32::from(quad[w + 1]));
     let top = p00 + fx * (p10 - p00);
     let bottom = p01 + fx * (p11 - p01);
     Some(top + fy * (bottom - top))
