@@ -132,6 +132,11 @@ fn review_counts_rates_latencies_link_and_errors_by_range() {
     assert!((err - s::error_m(1)).abs() < 1e-9);
     let z: f64 = row[col("truth_position_camera_z_m")].parse().unwrap();
     assert_eq!(z, s::centre_camera_m(1).z);
+    assert_eq!(row[col("not_detected")], "");
+    // seq 10, not detected: its reason's code.
+    let missed: Vec<&str> = lines[10].split(',').collect();
+    assert_eq!(missed[col("seq")], "10");
+    assert_eq!(missed[col("not_detected")], s::miss_reason(10).code());
 
     for name in [
         "position_body.png",

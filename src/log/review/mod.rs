@@ -73,7 +73,7 @@ position_body_x_m,position_body_y_m,position_body_z_m,\
 processing_ms,\
 truth_position_camera_x_m,truth_position_camera_y_m,truth_position_camera_z_m,\
 truth_normal_camera_x,truth_normal_camera_y,truth_normal_camera_z,\
-truth_range_m,position_error_m,normal_error_deg";
+truth_range_m,position_error_m,normal_error_deg,not_detected";
 
 /// Reviews `log`, writing `poses.csv`, the plots and the metadata into
 /// `out_dir`. Everything is written to a temporary folder beside `out_dir`
@@ -216,7 +216,7 @@ fn review_into(log: &Path, out_dir: &Path) -> Result<ReviewReport, LogError> {
                 if d.detected {
                     r.detected += 1;
                 } else {
-                    let reason = d.not_detected.as_ref().map_or("unknown", |n| &n.reason);
+                    let reason = d.not_detected.as_ref().map_or("unknown", |n| n.code());
                     *r.missed_by_reason.entry(reason.to_string()).or_default() += 1;
                 }
                 let processing = d.times_us.as_ref().map(|x| x.total_us / 1000.0);
@@ -248,7 +248,7 @@ fn review_into(log: &Path, out_dir: &Path) -> Result<ReviewReport, LogError> {
                 let time_s = t.saturating_sub(first_frame_ns.unwrap_or(t)) as f64 * 1e-9;
                 writeln!(
                     csv,
-                    "{time_s:.6},{t},{},{},{},{},{},{},{},{},{},{},{}",
+                    "{time_s:.6},{t},{},{},{},{},{},{},{},{},{},{},{},{}",
                     m.sequence,
                     u8::from(d.detected),
                     csv_xyz(d.position_camera),
@@ -260,6 +260,7 @@ fn review_into(log: &Path, out_dir: &Path) -> Result<ReviewReport, LogError> {
                     csv_opt(truth.map(|x| x.range_m)),
                     csv_opt(pos_err),
                     csv_opt(normal_err),
+                    d.not_detected.as_ref().map_or("", |n| n.code()),
                 )
                 .map_err(csv_err)?;
 

@@ -19,7 +19,22 @@ pub(super) struct DetectionLite {
 /// The reason code of a frame without a drogue.
 #[derive(Deserialize)]
 pub(super) struct NotDetectedLite {
-    pub(super) reason: String,
+    reason: String,
+}
+
+impl NotDetectedLite {
+    /// The reason's code as written, when it is one (lower-case letters and
+    /// underscores: nothing to quote in the CSV or to escape on a terminal);
+    /// `unknown` for anything else a log may hold.
+    pub(super) fn code(&self) -> &str {
+        let plain = !self.reason.is_empty()
+            && self.reason.len() <= 32
+            && self
+                .reason
+                .chars()
+                .all(|c| c.is_ascii_lowercase() || c == '_');
+        if plain { &self.reason } else { "unknown" }
+    }
 }
 
 #[derive(Deserialize)]
@@ -74,4 +89,31 @@ pub(super) struct CpuTotalLite {
 pub(super) struct QueuesLite {
     pub(super) log: u64,
     pub(super) link_events: u64,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::NotDetectedLite;
+
+    #[test]
+    fn a_reason_from_the_log_is_passed_on_only_as_a_plain_code() {
+        let code = |reason: &str| {
+            NotDetectedLite {
+                reason: reason.to_string(),
+            }
+            .code()
+            .to_string()
+        };
+        assert_eq!(code("no_canopy"), "no_canopy");
+        for odd in [
+            "",
+            "a,b",
+            "x\ny",
+            "\u{1b}[31mred",
+            "Blurred",
+            &"a".repeat(33),
+        ] {
+            assert_eq!(code(odd), "unknown", "{odd:?}");
+        }
+    }
 }
