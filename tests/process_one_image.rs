@@ -101,14 +101,11 @@ fn one_image_needs_a_camera_and_leaves_no_files() {
     assert!(!out_path.exists());
 }
 
-/// A frame without a drogue says why in its record (`not_detected`: the
-/// reason's code, its words, the candidates tried); a frame with one has no
-/// such field. Truth: a uniform sky has nothing dark in it (no candidate),
-/// and the simulator's frame holds the drogue.
-#[test]
-fn a_frame_without_a_drogue_says_why_in_its_record() {
-    let dir = tempfile::tempdir().unwrap();
-    let frames = dir.path().join("frames");
+/// A folder (`frames` in `dir`) with the simulator's first approach frame
+/// (a drogue, with its `camera.yaml`) and a uniform sky of the same size
+/// under each of `skies` (no drogue, nothing dark).
+fn drogue_and_skies(dir: &std::path::Path, skies: &[&str]) -> std::path::PathBuf {
+    let frames = dir.join("frames");
     let sim = bin()
         .args(["sim", "--scenario", "approach", "--frames", "1", "--out"])
         .arg(&frames)
@@ -121,9 +118,22 @@ fn a_frame_without_a_drogue_says_why_in_its_record() {
         .find(|p| p.extension().is_some_and(|e| e == "png"))
         .unwrap();
     let (w, h) = image::image_dimensions(&drogue).unwrap();
-    image::GrayImage::from_pixel(w, h, image::Luma([170]))
-        .save(frames.join("sky.png"))
-        .unwrap();
+    for name in skies {
+        image::GrayImage::from_pixel(w, h, image::Luma([170]))
+            .save(frames.join(name))
+            .unwrap();
+    }
+    frames
+}
+
+/// A frame without a drogue says why in its record (`not_detected`: the
+/// reason's code, its words, the candidates tried); a frame with one has no
+/// such field. Truth: a uniform sky has nothing dark in it (no candidate),
+/// and the simulator's frame holds the drogue.
+#[test]
+fn a_frame_without_a_drogue_says_why_in_its_record() {
+    let dir = tempfile::tempdir().unwrap();
+    let frames = drogue_and_skies(dir.path(), &["sky.png"]);
     let out = dir.path().join("out.jsonl");
     let run = bin()
         .arg("process")
@@ -167,24 +177,7 @@ fn a_frame_without_a_drogue_says_why_in_its_record() {
 #[test]
 fn run_ends_with_the_misses_by_reason() {
     let dir = tempfile::tempdir().unwrap();
-    let frames = dir.path().join("frames");
-    let sim = bin()
-        .args(["sim", "--scenario", "approach", "--frames", "1", "--out"])
-        .arg(&frames)
-        .output()
-        .unwrap();
-    assert!(sim.status.success());
-    let drogue = std::fs::read_dir(&frames)
-        .unwrap()
-        .map(|e| e.unwrap().path())
-        .find(|p| p.extension().is_some_and(|e| e == "png"))
-        .unwrap();
-    let (w, h) = image::image_dimensions(&drogue).unwrap();
-    for name in ["sky_1.png", "sky_2.png"] {
-        image::GrayImage::from_pixel(w, h, image::Luma([170]))
-            .save(frames.join(name))
-            .unwrap();
-    }
+    let frames = drogue_and_skies(dir.path(), &["sky_1.png", "sky_2.png"]);
     let run = bin()
         .args(["run", "--fast", "--mavlink", "udpout:127.0.0.1:9"])
         .arg("--source")

@@ -42,7 +42,7 @@ pub struct PipelineMeters {
     /// `None` when it had one.
     last_miss: Mutex<Option<&'static str>>,
     /// The frames without a drogue so far, by reason code.
-    missed_by_reason: Mutex<BTreeMap<String, u64>>,
+    missed_by_reason: Mutex<BTreeMap<&'static str, u64>>,
     /// CPU time spent inside the source (rendering, decoding), ns.
     source_cpu_ns: AtomicU64,
     /// The measurement thread's own CPU time so far, ns.
@@ -88,7 +88,7 @@ impl PipelineMeters {
             *last = reason;
         }
         if let (Some(reason), Ok(mut counts)) = (reason, self.missed_by_reason.lock()) {
-            *counts.entry(reason.to_string()).or_default() += 1;
+            *counts.entry(reason).or_default() += 1;
         }
     }
 
@@ -96,7 +96,7 @@ impl PipelineMeters {
     pub fn missed_by_reason(&self) -> BTreeMap<String, u64> {
         self.missed_by_reason
             .lock()
-            .map(|counts| counts.clone())
+            .map(|counts| counts.iter().map(|(r, n)| (r.to_string(), *n)).collect())
             .unwrap_or_default()
     }
 

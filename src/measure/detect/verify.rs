@@ -793,19 +793,15 @@ impl Detector {
         // most) before the pass gives up, for too few edges or (below) too
         // few of them on the ellipse.
         let closer = 0.5 * spacing_px;
-        let look_closer = glares_dropped && closer >= self.cfg.rim_point_spacing_px;
-        if undistorted.len() < self.cfg.min_rim_points as usize {
-            if look_closer {
-                return self.rim_pass_at(
-                    image,
-                    start,
-                    closer,
-                    max_points,
-                    rim_use,
-                    GlareCover::Most,
-                );
+        let closer_or = |this: &mut Self, short: Reject| {
+            if glares_dropped && closer >= this.cfg.rim_point_spacing_px {
+                this.rim_pass_at(image, start, closer, max_points, rim_use, GlareCover::Most)
+            } else {
+                Err(short)
             }
-            return Err(Reject::FewEdges(undistorted.len()));
+        };
+        if undistorted.len() < self.cfg.min_rim_points as usize {
+            return closer_or(self, Reject::FewEdges(undistorted.len()));
         }
         let min_tol = self.cfg.inlier_tolerance_px.max(0.1);
         let coarse_tol = (0.05 * start.b).max(3.0 * min_tol);
@@ -832,17 +828,7 @@ impl Detector {
             .filter(|&i| residuals[i] <= tol)
             .collect();
         if inliers.len() < self.cfg.min_rim_points as usize {
-            if look_closer {
-                return self.rim_pass_at(
-                    image,
-                    start,
-                    closer,
-                    max_points,
-                    rim_use,
-                    GlareCover::Most,
-                );
-            }
-            return Err(Reject::FewInliers(inliers.len()));
+            return closer_or(self, Reject::FewInliers(inliers.len()));
         }
         let mut inlier_contrast: Vec<f64> = inliers.iter().map(|&i| contrasts[i]).collect();
         let rim_contrast = median(&mut inlier_contrast);
