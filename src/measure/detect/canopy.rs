@@ -207,6 +207,15 @@ fn doubt_about(needed: f64) -> f64 {
     DOUBT_SIGMAS * (f * (1.0 - f) / SAMPLES as f64).sqrt()
 }
 
+/// Whether a candidate's canopy share `shown` is above `needed` beyond the
+/// doubt of reading [`SAMPLES`] points ([`doubt_about`]): a candidate
+/// whose share is within it may have passed by where its points fell
+/// (its ellipse taking in the probe's outline can still show half of the
+/// canopy's rim it predicts).
+pub(super) fn shown_beyond_doubt(shown: f64, needed: f64) -> bool {
+    shown >= needed + doubt_about(needed)
+}
+
 /// The canopy evidence of a candidate: the larger of its two poses'
 /// shares of judged rim points with an outward brightening of at least
 /// `edge.min_step_gray` near the predicted rim, read at [`SAMPLES`] points

@@ -535,6 +535,15 @@ impl Detector {
         accept: f64,
         verified: &mut Vec<Verified>,
     ) -> Result<bool, Reject> {
+        if let Some(drogue) = verified.iter().find(|v| self.within_shown_canopy(v, seed)) {
+            tracing::debug!(
+                centre_px = ?[seed.centre_px[0].round(), seed.centre_px[1].round()],
+                kind = seed.kind,
+                drogue_px = ?[drogue.ellipse.cx.round(), drogue.ellipse.cy.round()],
+                "inside the canopy of a candidate verified with it: not tried"
+            );
+            return Err(Reject::Known);
+        }
         let r = self.verify_seed(image, seed, index, verified);
         tracing::debug!(
             centre_px = ?[seed.centre_px[0].round(), seed.centre_px[1].round()],
@@ -565,6 +574,39 @@ impl Detector {
         let ends = ends_search(&v, accept);
         verified.push(v);
         Ok(ends)
+    }
+
+    /// Whether `seed`'s centre lies inside the canopy's outer rim of `v`,
+    /// a candidate that verified with its canopy shown beyond doubt
+    /// ([`canopy::shown_beyond_doubt`] of `min_canopy_fraction`): a seed
+    /// there is that drogue's own disc, probe, hose or canopy, and whatever
+    /// it verifies as is that drogue again. Not trying it spares a frame
+    /// the wide pass, fits and evidence of every such seed (most of a found
+    /// drogue's search when its score stays below `accept_score`). A
+    /// candidate whose canopy share is within the doubt does not: its
+    /// ellipse may have taken in the probe's outline, and a seed inside it
+    /// gives the rim. The canopy's rim is taken as the candidate's ellipse
+    /// scaled by `R / r` about its centre (exact for a circle facing the
+    /// camera; a region test, not a measurement).
+    pub(super) fn within_shown_canopy(&self, v: &Verified, seed: &Seed) -> bool {
+        let needed = self.cfg.min_canopy_fraction;
+        if !v
+            .canopy
+            .is_some_and(|shown| canopy::shown_beyond_doubt(shown, needed))
+        {
+            return false;
+        }
+        let ratio = self.drogue.canopy_radius_m / self.drogue.inner_radius_m;
+        if !(ratio.is_finite() && ratio >= 1.0) {
+            return false;
+        }
+        let [u, v_px] = self.camera.undistort_px(seed.centre_px);
+        let e = &v.ellipse;
+        let (sin, cos) = e.theta.sin_cos();
+        let (dx, dy) = (u - e.cx, v_px - e.cy);
+        let along = (dx * cos + dy * sin) / (ratio * e.a);
+        let across = (dy * cos - dx * sin) / (ratio * e.b);
+        along * along + across * across <= 1.0
     }
 
     /// The canopy's outer rim taken for the disc (under haze its step to

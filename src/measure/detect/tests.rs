@@ -1301,3 +1301,65 @@ fn the_reason_is_the_candidate_that_got_furthest() {
     m.tried(Err(Reject::NoCanopy(0.2)));
     assert_eq!(m.reason(), MissReason::NoCanopy(0.2));
 }
+
+/// A seed inside the canopy of a candidate that verified with its canopy
+/// shown beyond doubt is that drogue's (its disc, probe or canopy) and is
+/// not tried; one outside it, or beside a candidate whose canopy share is
+/// within the doubt of reading 48 points (2 binomial sigmas about the
+/// share needed: `2 sqrt(0.5 * 0.5 / 48)` = 0.144 at 0.5), is. The canopy
+/// rim is the candidate's ellipse scaled by `R / r` (0.33 / 0.15).
+#[test]
+fn seeds_inside_a_drogue_its_canopy_shows_are_not_tried_again() {
+    let cam = camera(1280, 960);
+    let d = detector(&cam);
+    let needed = Config::embedded().detect.min_canopy_fraction;
+    assert_eq!(needed, 0.5, "the doubt below is worked out at 0.5");
+    let doubt = 2.0 * (0.25f64 / 48.0).sqrt();
+    assert!(!canopy::shown_beyond_doubt(needed + doubt - 1e-3, needed));
+    assert!(canopy::shown_beyond_doubt(needed + doubt + 1e-3, needed));
+
+    let e = Ellipse::new(600.0, 400.0, 40.0, 20.0, 0.5);
+    let with_canopy = |canopy: Option<f64>| Verified {
+        ellipse: e,
+        points_px: Vec::new(),
+        undistorted: Vec::new(),
+        score: 0.6,
+        rim_contrast: 100.0,
+        step_widths_px: Vec::new(),
+        canopy,
+    };
+    let seed_at = |along_major: f64, along_minor: f64| {
+        let (s, c) = e.theta.sin_cos();
+        search::Seed {
+            centre_px: [
+                e.cx + along_major * c - along_minor * s,
+                e.cy + along_major * s + along_minor * c,
+            ],
+            a_px: 10.0,
+            b_px: 10.0,
+            theta: 0.0,
+            reach: 1.8,
+            from: 0.0,
+            kind: 3,
+        }
+    };
+    let ratio = 0.33 / 0.15;
+    let shown = with_canopy(Some(0.7));
+    for (inside, seed) in [
+        (true, seed_at(0.0, 0.0)),
+        (true, seed_at(0.98 * ratio * e.a, 0.0)),
+        (false, seed_at(1.02 * ratio * e.a, 0.0)),
+        (true, seed_at(0.0, -0.98 * ratio * e.b)),
+        (false, seed_at(0.0, -1.02 * ratio * e.b)),
+    ] {
+        assert_eq!(
+            d.within_shown_canopy(&shown, &seed),
+            inside,
+            "{:?}",
+            seed.centre_px
+        );
+    }
+    let centre = seed_at(0.0, 0.0);
+    assert!(!d.within_shown_canopy(&with_canopy(Some(0.6)), &centre));
+    assert!(!d.within_shown_canopy(&with_canopy(None), &centre));
+}
