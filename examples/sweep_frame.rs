@@ -11,8 +11,10 @@
 //! it (`everything`, `glare streak 30 px wide`, `no drogue: crescent`).
 //! `RUST_LOG=drogue_vision::measure::detect=debug` adds the detector's line
 //! per candidate (where it was, what kind of seed, why it was dropped), and
-//! `=trace` each rim pass. This is how a miss of the sweep is studied: the
-//! sweep names the frame, this shows why.
+//! `=trace` each rim pass; the line `truth in the frame` gives the disc's
+//! centre in the same (distorted) pixels as those lines, so that the seeds
+//! on the disc can be told from the rest. This is how a miss of the sweep
+//! is studied: the sweep names the frame, this shows why.
 
 #[path = "../tests/sweep/mod.rs"]
 mod sweep;
@@ -93,6 +95,21 @@ fn main() {
             100.0 * t.visible_rim_frac
         ),
         None => println!("truth: no drogue"),
+    }
+    // Where the disc's ellipse centre lies in the frame itself (distorted
+    // pixels, as the detector's debug lines give seeds and candidates), to
+    // tell which seed was on the disc; its orientation (undistorted).
+    if let Some(t) = &truth {
+        let cam = &frame.camera;
+        let (x, y) = cam.distort_normalized(
+            (t.ellipse.cx - cam.cx) / cam.fx,
+            (t.ellipse.cy - cam.cy) / cam.fy,
+        );
+        let c = [cam.cx + cam.fx * x, cam.cy + cam.fy * y];
+        println!(
+            "truth in the frame: centre ({:.1}, {:.1}) px (distorted), major axis at {:.3} rad (undistorted)",
+            c[0], c[1], t.ellipse.theta
+        );
     }
     match (&m.detection, &truth) {
         (None, _) => println!("measured: {}", sweep::not_detected(&m)),
