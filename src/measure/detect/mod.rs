@@ -280,7 +280,9 @@ enum Reject {
     /// The narrow passes did not settle.
     Unsettled,
     /// The seed's first fit or settled pass is the rim of a candidate
-    /// already verified, or that candidate's canopy rim.
+    /// already verified, or that candidate's canopy rim; or the seed lies
+    /// inside the canopy of a candidate verified with its canopy shown
+    /// beyond doubt (not verified at all).
     Known,
     /// A full-frame candidate whose minor semi-axis (undistorted pixels) is below
     /// [`canopy::smallest_judged_radius_px`]: too thin for its canopy rim

@@ -526,7 +526,9 @@ impl Detector {
 
     /// Verifies a seed (its random stream `index`), keeps it in `verified`
     /// when it passes, and says whether it ends the search
-    /// ([`ends_search`]), or why it did not pass.
+    /// ([`ends_search`]), or why it did not pass. A seed inside a candidate
+    /// its canopy shows ([`Self::within_shown_canopy`]) is not verified:
+    /// [`Reject::Known`], and not counted as a candidate tried.
     fn try_seed(
         &mut self,
         image: &GrayImage,
@@ -535,11 +537,11 @@ impl Detector {
         accept: f64,
         verified: &mut Vec<Verified>,
     ) -> Result<bool, Reject> {
-        if let Some(drogue) = verified.iter().find(|v| self.within_shown_canopy(v, seed)) {
+        if let Some(shown) = verified.iter().find(|v| self.within_shown_canopy(v, seed)) {
             tracing::debug!(
                 centre_px = ?[seed.centre_px[0].round(), seed.centre_px[1].round()],
                 kind = seed.kind,
-                drogue_px = ?[drogue.ellipse.cx.round(), drogue.ellipse.cy.round()],
+                drogue_px = ?[shown.ellipse.cx.round(), shown.ellipse.cy.round()],
                 "inside the canopy of a candidate verified with it: not tried"
             );
             return Err(Reject::Known);
@@ -576,7 +578,7 @@ impl Detector {
         Ok(ends)
     }
 
-    /// Whether `seed`'s centre lies inside the canopy's outer rim of `v`,
+    /// Whether `seed`'s centre lies inside the canopy's outer rim of `candidate`,
     /// a candidate that verified with its canopy shown beyond doubt
     /// ([`canopy::shown_beyond_doubt`] of `min_canopy_fraction`): a seed
     /// there is that drogue's own disc, probe, hose or canopy, and whatever
@@ -588,9 +590,9 @@ impl Detector {
     /// gives the rim. The canopy's rim is taken as the candidate's ellipse
     /// scaled by `R / r` about its centre (exact for a circle facing the
     /// camera; a region test, not a measurement).
-    pub(super) fn within_shown_canopy(&self, v: &Verified, seed: &Seed) -> bool {
+    pub(super) fn within_shown_canopy(&self, candidate: &Verified, seed: &Seed) -> bool {
         let needed = self.cfg.min_canopy_fraction;
-        if !v
+        if !candidate
             .canopy
             .is_some_and(|shown| canopy::shown_beyond_doubt(shown, needed))
         {
@@ -600,10 +602,10 @@ impl Detector {
         if !(ratio.is_finite() && ratio >= 1.0) {
             return false;
         }
-        let [u, v_px] = self.camera.undistort_px(seed.centre_px);
-        let e = &v.ellipse;
+        let [u, v] = self.camera.undistort_px(seed.centre_px);
+        let e = &candidate.ellipse;
         let (sin, cos) = e.theta.sin_cos();
-        let (dx, dy) = (u - e.cx, v_px - e.cy);
+        let (dx, dy) = (u - e.cx, v - e.cy);
         let along = (dx * cos + dy * sin) / (ratio * e.a);
         let across = (dy * cos - dx * sin) / (ratio * e.b);
         along * along + across * across <= 1.0
