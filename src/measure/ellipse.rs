@@ -70,6 +70,16 @@ impl Ellipse {
         }
     }
 
+    /// Whether the point `(u, v)` lies inside the ellipse or on it (`false`
+    /// for a point or an ellipse that is not finite).
+    pub fn contains(&self, u: f64, v: f64) -> bool {
+        let (s, c) = self.theta.sin_cos();
+        let (du, dv) = (u - self.cx, v - self.cy);
+        let along = (du * c + dv * s) / self.a;
+        let across = (dv * c - du * s) / self.b;
+        along * along + across * across <= 1.0
+    }
+
     /// The point at parameter `t` (radians) on the ellipse.
     pub fn point_at(&self, t: f64) -> [f64; 2] {
         let (s, c) = self.theta.sin_cos();
@@ -243,6 +253,21 @@ impl Conic {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn contains_is_inside_or_on_the_ellipse() {
+        let e = Ellipse::new(100.0, 50.0, 40.0, 20.0, 0.7);
+        for (t, inside) in [(0.99, true), (1.01, false)] {
+            for k in 0..12 {
+                let p = e.point_at(k as f64 * std::f64::consts::TAU / 12.0);
+                let (u, v) = (e.cx + t * (p[0] - e.cx), e.cy + t * (p[1] - e.cy));
+                assert_eq!(e.contains(u, v), inside, "{t} {k}");
+            }
+        }
+        assert!(e.contains(e.cx, e.cy));
+        assert!(!e.contains(f64::NAN, e.cy));
+        assert!(!Ellipse::new(0.0, 0.0, f64::NAN, 1.0, 0.0).contains(0.0, 0.0));
+    }
 
     #[test]
     fn conic_round_trip() {

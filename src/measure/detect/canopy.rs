@@ -117,6 +117,17 @@ pub struct DrogueCircles {
     pub canopy_band_m: f64,
 }
 
+impl DrogueCircles {
+    /// The canopy's outer rim around the disc's ellipse `disc` (undistorted
+    /// pixels), taken as that ellipse scaled by `R / r` about its centre:
+    /// exact for a circle facing the camera, a region and a size to compare
+    /// with, not a measurement (the pose's prediction is [`ring_support`]'s).
+    pub fn canopy_rim_around(&self, disc: &Ellipse) -> Ellipse {
+        let ratio = self.canopy_radius_m / self.inner_radius_m;
+        Ellipse::new(disc.cx, disc.cy, ratio * disc.a, ratio * disc.b, disc.theta)
+    }
+}
+
 /// What counts as the canopy's rim edge.
 #[derive(Clone, Copy, Debug)]
 pub struct RimEdge<'a> {

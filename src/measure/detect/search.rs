@@ -587,9 +587,8 @@ impl Detector {
     /// drogue's search when its score stays below `accept_score`). A
     /// candidate whose canopy share is within the doubt does not: its
     /// ellipse may have taken in the probe's outline, and a seed inside it
-    /// gives the rim. The canopy's rim is taken as the candidate's ellipse
-    /// scaled by `R / r` about its centre (exact for a circle facing the
-    /// camera; a region test, not a measurement).
+    /// gives the rim. The canopy's rim is
+    /// [`canopy::DrogueCircles::canopy_rim_around`] the candidate's ellipse.
     pub(super) fn within_shown_canopy(&self, candidate: &Verified, seed: &Seed) -> bool {
         let needed = self.cfg.min_canopy_fraction;
         if !candidate
@@ -598,17 +597,11 @@ impl Detector {
         {
             return false;
         }
-        let ratio = self.drogue.canopy_radius_m / self.drogue.inner_radius_m;
-        if !(ratio.is_finite() && ratio >= 1.0) {
-            return false;
-        }
+        // The seed's centre, undistorted pixels, as the ellipse is.
         let [u, v] = self.camera.undistort_px(seed.centre_px);
-        let e = &candidate.ellipse;
-        let (sin, cos) = e.theta.sin_cos();
-        let (dx, dy) = (u - e.cx, v - e.cy);
-        let along = (dx * cos + dy * sin) / (ratio * e.a);
-        let across = (dy * cos - dx * sin) / (ratio * e.b);
-        along * along + across * across <= 1.0
+        self.drogue
+            .canopy_rim_around(&candidate.ellipse)
+            .contains(u, v)
     }
 
     /// The canopy's outer rim taken for the disc (under haze its step to

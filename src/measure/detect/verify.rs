@@ -331,11 +331,9 @@ impl Detector {
     /// passes and canopy test, the largest of any seed's, would only end
     /// in [`Reject::NoCanopy`].
     fn known_rim(&self, known: &[Verified], e: &Ellipse) -> bool {
-        let ratio = self.drogue.canopy_radius_m / self.drogue.inner_radius_m;
         known.iter().any(|v| {
             let k = &v.ellipse;
-            let canopy = Ellipse::new(k.cx, k.cy, ratio * k.a, ratio * k.b, k.theta);
-            same_rim(k, e) || same_rim(&canopy, e)
+            same_rim(k, e) || same_rim(&self.drogue.canopy_rim_around(k), e)
         })
     }
 
