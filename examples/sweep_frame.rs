@@ -100,12 +100,7 @@ fn main() {
     // pixels, as the detector's debug lines give seeds and candidates), to
     // tell which seed was on the disc; its orientation (undistorted).
     if let Some(t) = &truth {
-        let cam = &frame.camera;
-        let (x, y) = cam.distort_normalized(
-            (t.ellipse.cx - cam.cx) / cam.fx,
-            (t.ellipse.cy - cam.cy) / cam.fy,
-        );
-        let c = [cam.cx + cam.fx * x, cam.cy + cam.fy * y];
+        let c = frame.camera.distort_px([t.ellipse.cx, t.ellipse.cy]);
         println!(
             "truth in the frame: centre ({:.1}, {:.1}) px (distorted), major axis at {:.3} rad (undistorted)",
             c[0], c[1], t.ellipse.theta

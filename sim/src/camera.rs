@@ -96,6 +96,13 @@ impl SimCamera {
         Some([self.fx * xd + self.cx, self.fy * yd + self.cy])
     }
 
+    /// Undistorted pixel → distorted pixel (where it lies in the frame).
+    pub fn distort_px(&self, p_px: [f64; 2]) -> [f64; 2] {
+        let (xd, yd) =
+            self.distort_normalized((p_px[0] - self.cx) / self.fx, (p_px[1] - self.cy) / self.fy);
+        [self.fx * xd + self.cx, self.fy * yd + self.cy]
+    }
+
     /// Distorted pixel → undistorted pixel.
     pub fn undistort_px(&self, p_px: [f64; 2]) -> Option<[f64; 2]> {
         let (x, y) = self
@@ -222,9 +229,7 @@ mod tests {
         for v in (0..960).step_by(37) {
             for u in (0..1280).step_by(41) {
                 let p = [u as f64, v as f64];
-                let q = c.undistort_px(p).unwrap();
-                let (xd, yd) = c.distort_normalized((q[0] - c.cx) / c.fx, (q[1] - c.cy) / c.fy);
-                let back = [c.fx * xd + c.cx, c.fy * yd + c.cy];
+                let back = c.distort_px(c.undistort_px(p).unwrap());
                 assert!((back[0] - p[0]).abs() < 1e-9 && (back[1] - p[1]).abs() < 1e-9);
             }
         }

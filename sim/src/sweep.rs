@@ -669,13 +669,7 @@ mod tests {
                 level.factor,
                 Factor::Baseline | Factor::Range | Factor::Tilt
             ) {
-                let cam = &f.camera;
-                let (xn, yn) = (
-                    (t.ellipse.cx - cam.cx) / cam.fx,
-                    (t.ellipse.cy - cam.cy) / cam.fy,
-                );
-                let (xd, yd) = cam.distort_normalized(xn, yn);
-                let (u, v) = (cam.fx * xd + cam.cx, cam.fy * yd + cam.cy);
+                let [u, v] = f.camera.distort_px([t.ellipse.cx, t.ellipse.cy]);
                 let g = f.image.get_pixel(u.round() as u32, v.round() as u32)[0];
                 assert!(g < 60, "{}: grey {g} at the disc centre", level.label());
             }
