@@ -80,6 +80,30 @@ const BEYOND_FAR_TO_OUTER: f64 = 0.85;
 const FILL_DIRECTIONS: usize = 24;
 const FILL_FRACTIONS: [f64; 5] = [0.1, 0.3, 0.5, 0.7, 0.85];
 
+/// Which of a fill direction's samples (in order along it) are a glare's:
+/// its veil (lighter than `veil_from`) and the skirt on either side of it,
+/// the samples at or above the mid level (`mid`) that keep falling away
+/// from the veil. A glare's light falls off smoothly from its core; a
+/// sample darker than the mid level, or lighter than the one before it,
+/// is the surface's again.
+fn glare_skirt<const N: usize>(samples: &[Option<f32>; N], veil_from: f32, mid: f32) -> [bool; N] {
+    let mut glare = samples.map(|s| s.is_some_and(|v| v > veil_from));
+    // Whether sample `to`, next to `from` on the side away from the veil,
+    // continues the skirt.
+    let falls = |from: usize, to: usize| matches!((samples[from], samples[to]), (Some(a), Some(b)) if b >= mid && b <= a);
+    for to in 1..N {
+        if glare[to - 1] && !glare[to] && falls(to - 1, to) {
+            glare[to] = true;
+        }
+    }
+    for to in (0..N.saturating_sub(1)).rev() {
+        if glare[to + 1] && !glare[to] && falls(to + 1, to) {
+            glare[to] = true;
+        }
+    }
+    glare
+}
+
 impl Detector {
     /// Share of samples inside `ellipse` (undistorted pixels) darker than
     /// the middle of the rim's step. Samples lie on [`FILL_DIRECTIONS`] rays
@@ -103,34 +127,52 @@ impl Detector {
             return 1.0;
         }
         let margin = VEIL_SIGMAS * self.noise_gray as f32 + VEIL_MIN_GRAY;
-        let (mut dark, mut counted) = (0usize, 0usize);
-        for k in 0..FILL_DIRECTIONS {
+        let directions: [Option<(FillLevels, [Option<f32>; FILL_FRACTIONS.len()])>;
+            FILL_DIRECTIONS] = std::array::from_fn(|k| {
             let phi = TAU * (k as f64 + 0.5) / FILL_DIRECTIONS as f64;
             let r = polar_radius(ellipse.a, ellipse.b, ellipse.theta, phi);
             // The lookup's angle in atan2's turn, as the levels' are.
             let from_atan2 = if phi > PI { phi - TAU } else { phi };
-            let Some(&(_, step)) = canopy::nearest(levels, from_atan2) else {
-                continue;
-            };
+            let &(_, step) = canopy::nearest(levels, from_atan2)?;
             let (sin, cos) = phi.sin_cos();
             let samples = FILL_FRACTIONS.map(|f| {
                 let q = [ellipse.cx + f * r * cos, ellipse.cy + f * r * sin];
                 let [u, v] = self.camera.distort_px(q);
                 rim::sample(image, u, v)
             });
+            Some((step, samples))
+        });
+        let saturated =
+            |samples: &[Option<f32>]| samples.iter().flatten().any(|&v| v >= SATURATED_GRAY);
+        // A glare over the disc saturates part of its inside.
+        let glare_over = directions
+            .iter()
+            .flatten()
+            .any(|(_, samples)| saturated(samples));
+        let (mut dark, mut counted) = (0usize, 0usize);
+        for (step, samples) in directions.into_iter().flatten() {
             // A direction that runs through saturated pixels looks into a
             // glare: its other samples lie in the glare's skirt, which
             // lightens them smoothly, not as a light surface would.
-            if samples.iter().flatten().any(|&v| v >= SATURATED_GRAY) {
+            if saturated(&samples) {
                 continue;
             }
             // A sample lighter than the rim's light side is veiled: what a
             // hole in a dark shape shows is the background beyond it, no
-            // lighter than that.
-            for value in samples.into_iter().flatten() {
-                if value > step.light + margin {
+            // lighter than that. Under a glare over the disc, the veil is
+            // its skirt, which falls off smoothly on either side: the light
+            // samples next to it that keep falling away from it are that
+            // skirt too, not a light inside.
+            let veil_from = step.light + margin;
+            let glare = if glare_over {
+                glare_skirt(&samples, veil_from, step.mid)
+            } else {
+                samples.map(|s| s.is_some_and(|v| v > veil_from))
+            };
+            for (value, in_glare) in samples.into_iter().zip(glare) {
+                let Some(value) = value.filter(|_| !in_glare) else {
                     continue;
-                }
+                };
                 counted += 1;
                 if value < step.mid {
                     dark += 1;
@@ -415,5 +457,63 @@ impl Rise {
         // An unmeasured full step (NaN) leaves the rim's step to decide.
         let shaded = self.over_full <= MAX_SHADED_RISE;
         self.over_step > MAX_RISE_BEYOND && !shaded
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::glare_skirt;
+
+    /// A glare's veil (above 180) and its skirt falling off on either side
+    /// down to the mid level (90); the surface's dark and light beyond.
+    #[test]
+    fn the_skirt_falls_away_from_the_veil_on_either_side() {
+        let veil_from = 180.0;
+        let mid = 90.0;
+        // Veil at the centre, skirt outward, then the disc's dark.
+        let outward = [
+            Some(250.0),
+            Some(200.0),
+            Some(120.0),
+            Some(60.0),
+            Some(40.0),
+        ];
+        assert_eq!(
+            glare_skirt(&outward, veil_from, mid),
+            [true, true, true, false, false]
+        );
+        // Veil near the rim, skirt inward toward the centre.
+        let inward = [
+            Some(40.0),
+            Some(100.0),
+            Some(150.0),
+            Some(230.0),
+            Some(140.0),
+        ];
+        assert_eq!(
+            glare_skirt(&inward, veil_from, mid),
+            [false, true, true, true, true]
+        );
+        // A light sample lighter than the one before it is the surface's
+        // again (a light inside), and so is everything past a dark one.
+        let rising = [
+            Some(200.0),
+            Some(120.0),
+            Some(150.0),
+            Some(70.0),
+            Some(130.0),
+        ];
+        assert_eq!(
+            glare_skirt(&rising, veil_from, mid),
+            [true, true, false, false, false]
+        );
+        // No veil, no glare; an unread sample ends the skirt.
+        let plain = [Some(60.0), Some(170.0), Some(120.0), None, Some(100.0)];
+        assert_eq!(glare_skirt(&plain, veil_from, mid), [false; 5]);
+        let gap = [Some(220.0), None, Some(120.0), Some(100.0), Some(95.0)];
+        assert_eq!(
+            glare_skirt(&gap, veil_from, mid),
+            [true, false, false, false, false]
+        );
     }
 }

@@ -1363,3 +1363,29 @@ fn seeds_inside_a_drogue_its_canopy_shows_are_not_tried_again() {
     assert!(!d.within_shown_canopy(&with_canopy(Some(0.6)), &centre));
     assert!(!d.within_shown_canopy(&with_canopy(None), &centre));
 }
+
+/// A glare streak across a small disc whose core saturates only near the
+/// disc's centre: beside the saturated samples its skirt lifts the inside
+/// above the rim's mid level, falling off toward the rim. On the fill
+/// test's directions that miss the saturated core, those samples are the
+/// glare's skirt, not a light inside; counted as light, they failed each
+/// of these discs as `LightInside` (three of 300 streaks over three discs,
+/// 12-20 px wide, 240-300 gray levels at their peak; the other 297 are
+/// found either way).
+#[test]
+fn a_glare_skirt_beside_its_saturated_core_does_not_count_as_light_inside() {
+    let (w, h) = (400, 300);
+    let cam = camera(w, h);
+    for (seed, truth, angle) in [
+        (50, Ellipse::new(201.3, 148.7, 27.0, 15.0, 0.2), 2.8),
+        (52, Ellipse::new(200.4, 149.3, 22.0, 18.0, -0.7), 2.2),
+        (52, Ellipse::new(200.4, 149.3, 22.0, 18.0, -0.7), 2.8),
+    ] {
+        let sharp = Scene::new(truth).render(w, h, 6.0, seed);
+        let img = add_glare_streak(&sharp, [truth.cx, truth.cy - 3.0], angle, 20.0, 240.0);
+        let cand = detector(&cam)
+            .detect(&img, None)
+            .unwrap_or_else(|| panic!("{truth:?} not detected under a streak at {angle} rad"));
+        assert_near(&cand.ellipse_px, &truth, 1.0, 1.0);
+    }
+}
