@@ -90,7 +90,10 @@ fn glare_skirt<const N: usize>(samples: &[Option<f32>; N], veil_from: f32, mid: 
     let mut glare = samples.map(|s| s.is_some_and(|v| v > veil_from));
     // Whether sample `to`, next to `from` on the side away from the veil,
     // continues the skirt.
-    let falls = |from: usize, to: usize| matches!((samples[from], samples[to]), (Some(a), Some(b)) if b >= mid && b <= a);
+    let falls = |from: usize, to: usize| match (samples[from], samples[to]) {
+        (Some(nearer), Some(this)) => this >= mid && this <= nearer,
+        _ => false,
+    };
     for to in 1..N {
         if glare[to - 1] && !glare[to] && falls(to - 1, to) {
             glare[to] = true;

@@ -1370,8 +1370,8 @@ fn seeds_inside_a_drogue_its_canopy_shows_are_not_tried_again() {
 /// test's directions that miss the saturated core, those samples are the
 /// glare's skirt, not a light inside; counted as light, they failed each
 /// of these discs as `LightInside` (three of 300 streaks over three discs,
-/// 12-20 px wide, 240-300 gray levels at their peak; the other 297 are
-/// found either way).
+/// 12-20 px wide, 240-300 gray levels at their peak; of the others, 294
+/// are found either way and three missed either way).
 #[test]
 fn a_glare_skirt_beside_its_saturated_core_does_not_count_as_light_inside() {
     let (w, h) = (400, 300);
