@@ -471,52 +471,36 @@ mod tests {
     /// down to the mid level (90); the surface's dark and light beyond.
     #[test]
     fn the_skirt_falls_away_from_the_veil_on_either_side() {
-        let veil_from = 180.0;
-        let mid = 90.0;
-        // Veil at the centre, skirt outward, then the disc's dark.
-        let outward = [
-            Some(250.0),
-            Some(200.0),
-            Some(120.0),
-            Some(60.0),
-            Some(40.0),
+        let (veil_from, mid) = (180.0, 90.0);
+        let (t, f) = (true, false);
+        let cases = [
+            // Veil at the centre, skirt outward, then the disc's dark.
+            ([250.0, 200.0, 120.0, 60.0, 40.0].map(Some), [t, t, t, f, f]),
+            // Veil near the rim, skirt inward toward the centre.
+            (
+                [40.0, 100.0, 150.0, 230.0, 140.0].map(Some),
+                [f, t, t, t, t],
+            ),
+            // A light sample lighter than the one before it is the
+            // surface's again (a light inside), and so is everything past
+            // a dark one.
+            (
+                [200.0, 120.0, 150.0, 70.0, 130.0].map(Some),
+                [t, t, f, f, f],
+            ),
+            // No veil, no glare.
+            (
+                [Some(60.0), Some(170.0), Some(120.0), None, Some(100.0)],
+                [f; 5],
+            ),
+            // An unread sample ends the skirt.
+            (
+                [Some(220.0), None, Some(120.0), Some(100.0), Some(95.0)],
+                [t, f, f, f, f],
+            ),
         ];
-        assert_eq!(
-            glare_skirt(&outward, veil_from, mid),
-            [true, true, true, false, false]
-        );
-        // Veil near the rim, skirt inward toward the centre.
-        let inward = [
-            Some(40.0),
-            Some(100.0),
-            Some(150.0),
-            Some(230.0),
-            Some(140.0),
-        ];
-        assert_eq!(
-            glare_skirt(&inward, veil_from, mid),
-            [false, true, true, true, true]
-        );
-        // A light sample lighter than the one before it is the surface's
-        // again (a light inside), and so is everything past a dark one.
-        let rising = [
-            Some(200.0),
-            Some(120.0),
-            Some(150.0),
-            Some(70.0),
-            Some(130.0),
-        ];
-        assert_eq!(
-            glare_skirt(&rising, veil_from, mid),
-            [true, true, false, false, false]
-        );
-        // No veil, no glare; an unread sample ends the skirt.
-        let plain = [Some(60.0), Some(170.0), Some(120.0), None, Some(100.0)];
-        assert_eq!(glare_skirt(&plain, veil_from, mid), [false; 5]);
-        let gap = [Some(220.0), None, Some(120.0), Some(100.0), Some(95.0)];
-        assert_eq!(
-            glare_skirt(&gap, veil_from, mid),
-            [true, false, false, false, false]
-        );
+        for (samples, glare) in cases {
+            assert_eq!(glare_skirt(&samples, veil_from, mid), glare, "{samples:?}");
+        }
     }
 }
