@@ -99,6 +99,85 @@ pub(super) struct RimPass {
     pub(super) mids: Vec<(f64, f32)>,
 }
 
+/// The steps of a narrow pass, one per ray that found one, column by
+/// column (the fits take the points as one slice), in ray order.
+struct RaySteps {
+    /// Where each step crosses its mid level, distorted pixels.
+    points_px: Vec<[f64; 2]>,
+    /// The same points, undistorted.
+    undistorted: Vec<[f64; 2]>,
+    /// Each step's light minus its dark level, gray.
+    contrasts: Vec<f64>,
+    /// The middle between its levels, gray.
+    mid_levels: Vec<f32>,
+    /// Its width (twice its edge-to-light distance) less the profile
+    /// smoothing's own spread, pixels: wide along a motion blur.
+    widths_px: Vec<f64>,
+    /// Steps into saturated pixels: a glare streak's skirt.
+    glares: Vec<bool>,
+    /// On a measuring pass (else empty), the edge the pose is measured
+    /// from, distorted pixels ...
+    measured_px: Vec<[f64; 2]>,
+    /// ... and what moves it for the canopy's shading.
+    shading: Vec<ShadedEdge>,
+}
+
+impl RaySteps {
+    fn with_capacity(rays: usize, rim_use: RimUse) -> Self {
+        let measuring = if rim_use == RimUse::Measure { rays } else { 0 };
+        Self {
+            points_px: Vec::with_capacity(rays),
+            undistorted: Vec::with_capacity(rays),
+            contrasts: Vec::with_capacity(rays),
+            mid_levels: Vec::with_capacity(rays),
+            widths_px: Vec::with_capacity(rays),
+            glares: Vec::with_capacity(rays),
+            measured_px: Vec::with_capacity(measuring),
+            shading: Vec::with_capacity(measuring),
+        }
+    }
+
+    fn len(&self) -> usize {
+        self.points_px.len()
+    }
+
+    /// Takes out the steps whose flag in `marked` is set.
+    fn drop_marked(&mut self, marked: &[bool]) {
+        if !marked.iter().any(|&m| m) {
+            return;
+        }
+        drop_marked(&mut self.points_px, marked);
+        drop_marked(&mut self.undistorted, marked);
+        drop_marked(&mut self.contrasts, marked);
+        drop_marked(&mut self.mid_levels, marked);
+        drop_marked(&mut self.widths_px, marked);
+        drop_marked(&mut self.glares, marked);
+        drop_marked(&mut self.measured_px, marked);
+        drop_marked(&mut self.shading, marked);
+    }
+}
+
+/// One round of a narrow pass's rays ([`Detector::ray_steps`]).
+struct RayRound {
+    steps: RaySteps,
+    /// Rays whose window lies in the image.
+    rays_in_image: usize,
+    /// Share of the steps (a glare's skirts aside) that run into their
+    /// window's ends.
+    clipped_share: f64,
+}
+
+/// What [`Detector::drop_glares_and_bars`] took out of a pass.
+struct GlareDrop {
+    /// The glare's steps (undistorted pixels) with their levels, for the
+    /// fill test; empty unless they were taken out.
+    glare_steps: Vec<([f64; 2], FillLevels)>,
+    /// Whether steps into saturation were taken out.
+    glares_dropped: bool,
+    /// How many (their rays do not count as the rim's).
+    glared: usize,
+}
+
 /// The edges of a narrow pass that the pose is measured from, not yet
 /// placed: the canopy's shading's move and the undistortion wait until the
 /// pass is kept (a tracked frame's first pass is often repeated from its
@@ -487,7 +566,7 @@ impl Detector {
     /// rim's others by more than the rim's contrast, and beyond it, short of
     /// where the canopy's outer rim could lie, the level falls back below
     /// the step's mid level (the dark shape again, past the bar). A canopy
-    /// lit by a glare is lighter too, but stays light that far. `points_px`
+    /// lit by a glare is lighter too, but stays light that far. The steps
     /// lie on rays from `centre` (both image pixels, as in the frame);
     /// `min_radius_px` is the smallest radius of the ellipse searched
     /// (undistorted pixels: a bar lies anywhere across the disc, a step onto
@@ -496,15 +575,14 @@ impl Detector {
         &mut self,
         image: &GrayImage,
         centre: [f64; 2],
-        points_px: &[[f64; 2]],
-        contrasts: &[f64],
-        mid_levels: &[f32],
+        steps: &RaySteps,
         min_radius_px: f64,
     ) -> Vec<bool> {
-        let mut bars = vec![false; contrasts.len()];
-        let lights: Vec<f64> = contrasts
+        let mut bars = vec![false; steps.len()];
+        let lights: Vec<f64> = steps
+            .contrasts
             .iter()
-            .zip(mid_levels)
+            .zip(&steps.mid_levels)
             .map(|(&c, &m)| f64::from(m) + 0.5 * c)
             .collect();
         // At the least the fill test's margin for a glare's veil.
@@ -519,7 +597,7 @@ impl Detector {
         if high - low <= margin_floor {
             return bars;
         }
-        let contrast = median(&mut contrasts.to_vec());
+        let contrast = median(&mut steps.contrasts.clone());
         let light = median(&mut lights.clone());
         let margin = contrast.max(margin_floor);
         let canopy_gap = (self.drogue.canopy_radius_m / self.drogue.inner_radius_m - 1.0).max(0.0);
@@ -527,7 +605,7 @@ impl Detector {
             if lights[i] <= light + margin {
                 continue;
             }
-            let p = points_px[i];
+            let p = steps.points_px[i];
             let (dx, dy) = (p[0] - centre[0], p[1] - centre[1]);
             let s = dx.hypot(dy);
             if s < 1.0 {
@@ -537,7 +615,7 @@ impl Detector {
             let reach = BAR_REACH_CANOPY_GAPS * canopy_gap * s.max(min_radius_px);
             rim::profile(image, centre, dir, s, s + reach, 1.0, &mut self.profile);
             // Two samples running below the mid level: not one noisy one.
-            let mid = mid_levels[i];
+            let mid = steps.mid_levels[i];
             *bar = self.profile.windows(2).any(|w| w.iter().all(|&v| v < mid));
         }
         bars
@@ -563,6 +641,246 @@ impl Detector {
         )
     }
 
+    /// One round of a narrow pass: a step looked for on each of `rays`
+    /// rays from `centre` (distorted pixels), in a window about `start`'s
+    /// rim widened by `widen` (see [`Self::rim_pass_at`]).
+    #[allow(clippy::too_many_arguments)]
+    fn ray_steps(
+        &mut self,
+        image: &GrayImage,
+        start: &Ellipse,
+        centre: [f64; 2],
+        rays: usize,
+        widen: f64,
+        rim_use: RimUse,
+        cover: GlareCover,
+    ) -> RayRound {
+        let min_contrast = self.cfg.min_contrast_gray as f32;
+        let (w, h) = (f64::from(image.width()), f64::from(image.height()));
+        let inside = |p: [f64; 2]| p[0] >= 0.0 && p[1] >= 0.0 && p[0] <= w - 1.0 && p[1] <= h - 1.0;
+        let mut faint = Vec::new();
+        let mut steps = RaySteps::with_capacity(rays, rim_use);
+        let mut rays_in_image = 0usize;
+        let mut clipped = 0usize;
+        let (sin_theta, cos_theta) = start.theta.sin_cos();
+        for dir in ray_directions(rays) {
+            // The ray's angle to the major axis: phi - theta.
+            let (cos_local, sin_local) = (
+                dir[0] * cos_theta + dir[1] * sin_theta,
+                dir[1] * cos_theta - dir[0] * sin_theta,
+            );
+            let r = polar_radius_local(start.a, start.b, cos_local, sin_local);
+            let base =
+                (self.cfg.rim_search_fraction * r).clamp(4.0, self.cfg.rim_search_max_px.max(4.0));
+            let margin = if widen > 1.0 {
+                (base * widen)
+                    .min(MAX_WIDE_MARGIN_RADII * r)
+                    .min(MAX_WIDE_MARGIN_PX)
+                    .max(base)
+            } else {
+                base
+            };
+            let (s0, s1) = ((r - margin).max(0.5), r + margin);
+            let far = [centre[0] + s1 * dir[0], centre[1] + s1 * dir[1]];
+            let near = [centre[0] + s0 * dir[0], centre[1] + s0 * dir[1]];
+            if !(inside(far) && inside(near)) {
+                continue;
+            }
+            rays_in_image += 1;
+            rim::profile(image, centre, dir, s0, s1, 0.5, &mut self.profile);
+            // In noise, the step is located on the smoothed profile: its
+            // ends and levels are then the step's, not the noise's.
+            let cap = (0.1 * r) as usize;
+            let half = self.smooth_half.min(cap);
+            if half > 0 {
+                self.raw_profile.clone_from(&self.profile);
+                rim::smooth(&mut self.profile, half, &mut self.scratch);
+            }
+            let mut half = half;
+            let mut found = rim::strongest_rise(&self.profile, s0, 0.5, min_contrast);
+            // A long blurred ramp rises little per sample: smoothed
+            // only for the frame's noise, its rise dips below the fade
+            // level inside the ramp, which then ends there and takes
+            // its levels inside it (the rim comes out too far out along
+            // the blur). On a pass whose window was widened for blur,
+            // a step is found again on a profile smoothed for its own
+            // rise, twice at most (the first width is short for the
+            // same reason). Not a step into saturated pixels: a glare
+            // streak's skirt is no blur.
+            let ramp_rounds = if widen > 1.0 { 2 } else { 0 };
+            for _ in 0..ramp_rounds {
+                let Some(e) = found else { break };
+                let raw = if half > 0 {
+                    &self.raw_profile
+                } else {
+                    &self.profile
+                };
+                if glare_on_light_side(raw, s0, 0.5, &e) {
+                    break;
+                }
+                let width = 2.0 * (e.light_s - e.s) - self.smoothing_spread_px[half];
+                let ramp_half =
+                    smoothing_half_for_ramp(self.noise_gray, f64::from(e.light - e.dark), width)
+                        .min(cap);
+                if ramp_half <= half {
+                    break;
+                }
+                if half == 0 {
+                    self.raw_profile.clone_from(&self.profile);
+                }
+                self.profile.clone_from(&self.raw_profile);
+                rim::smooth(&mut self.profile, ramp_half, &mut self.scratch);
+                half = ramp_half;
+                found = rim::strongest_rise(&self.profile, s0, 0.5, min_contrast);
+            }
+            let Some(mut e) = found else {
+                continue;
+            };
+            // A step into saturated pixels is most likely the skirt of a
+            // glare streak lying over the disc: its width says nothing of
+            // blur, and unless most steps are such, it gives no rim point
+            // ([`Self::rim_pass_at`]).
+            let raw = if half > 0 {
+                &self.raw_profile
+            } else {
+                &self.profile
+            };
+            let glare = glare_on_light_side(raw, s0, 0.5, &e)
+                || (cover == GlareCover::Most && glare_before_step(raw, s0, 0.5, &e));
+            if half > 0 {
+                let mid = 0.5 * (e.dark + e.light);
+                let reach = 0.5 * self.smoothing_spread_px[half] + 1.0;
+                if let Some(s) = rim::crossing_near(&self.raw_profile, s0, 0.5, mid, e.s, reach) {
+                    e.s = s;
+                }
+            }
+            let p = [centre[0] + e.s * dir[0], centre[1] + e.s * dir[1]];
+            steps.points_px.push(p);
+            steps.undistorted.push(self.camera.undistort_px(p));
+            if rim_use == RimUse::Measure {
+                let (measured, light_slope) = self.measured_edge(&e, half, cap, s0, &mut faint);
+                steps.measured_px.push([
+                    centre[0] + measured.s * dir[0],
+                    centre[1] + measured.s * dir[1],
+                ]);
+                steps
+                    .shading
+                    .push(ShadedEdge::new(dir, &measured, light_slope));
+            }
+            steps.contrasts.push(f64::from(e.light - e.dark));
+            steps.mid_levels.push(0.5 * (e.dark + e.light));
+            // The smoothing's own spread is not the step's.
+            let spread = self.smoothing_spread_px[half];
+            steps
+                .widths_px
+                .push((2.0 * (e.light_s - e.s) - spread).max(0.0));
+            clipped += usize::from(e.clipped && !glare);
+            steps.glares.push(glare);
+        }
+        tracing::trace!(
+            rays,
+            rays_in_image,
+            edges = steps.len(),
+            clipped,
+            widen,
+            "rim pass"
+        );
+        RayRound {
+            clipped_share: clipped as f64 / steps.len().max(1) as f64,
+            steps,
+            rays_in_image,
+        }
+    }
+
+    /// The ellipse of a narrow pass's points (undistorted pixels) about
+    /// `start`, and the distance from it counted as on the rim: a coarse
+    /// refit within a band of 5 % of the minor axis, then one within a few
+    /// sigmas of the points' own scatter about it. `residuals` is scratch.
+    fn narrow_fit(
+        &self,
+        start: &Ellipse,
+        undistorted: &[[f64; 2]],
+        residuals: &mut Vec<f64>,
+    ) -> Result<(Ellipse, f64), Reject> {
+        let min_tol = self.cfg.inlier_tolerance_px.max(0.1);
+        let coarse_tol = (0.05 * start.b).max(3.0 * min_tol);
+        let coarse =
+            conic_fit::refine(start, undistorted, coarse_tol, 2).ok_or(Reject::NoEllipse)?;
+        // The edges' own scatter sets what is "on the rim": a blurred rim in
+        // noise is located to a pixel or two (noise over the ramp's slope),
+        // a sharp one to a tenth.
+        conic_fit::residuals(&coarse, undistorted, residuals);
+        let mut near: Vec<f64> = residuals
+            .iter()
+            .copied()
+            .filter(|r| *r <= coarse_tol)
+            .collect();
+        let sigma = 1.4826 * median(&mut near);
+        let tol = (NOISE_TOLERANCE_SIGMAS * sigma).clamp(min_tol, (0.5 * coarse_tol).max(min_tol));
+        let ellipse = conic_fit::refine(&coarse, undistorted, tol, 2).ok_or(Reject::NoEllipse)?;
+        if !self.plausible(&ellipse, 1.0) {
+            return Err(Reject::Implausible);
+        }
+        Ok((ellipse, tol))
+    }
+
+    /// Takes out of `steps` those into saturated pixels (a glare streak over
+    /// the disc), unless they are most of the rim (an overexposed canopy),
+    /// and those onto a light bar over the disc ([`Self::light_bars`]),
+    /// unless most are; the glare's steps come back with their levels for
+    /// the fill test. `min_radius_px` as for [`Self::light_bars`].
+    fn drop_glares_and_bars(
+        &mut self,
+        image: &GrayImage,
+        centre: [f64; 2],
+        steps: &mut RaySteps,
+        min_radius_px: f64,
+    ) -> GlareDrop {
+        // Steps into saturated pixels (a glare streak over the disc) give
+        // no rim points and do not count against the candidate, unless
+        // they are most of the rim (an overexposed canopy).
+        let glared = steps.glares.iter().filter(|&&g| g).count();
+        let glares_dropped = glared > 0 && 2 * glared < steps.len();
+        // Steps onto a light bar over the disc give no rim points either,
+        // but count against it as an occluder's would: the disc's rim is
+        // hidden there, and a sliver of the disc beside the bar must not
+        // score as a whole disc.
+        let mut bars = self.light_bars(image, centre, steps, min_radius_px);
+        // A step into saturation is the glare's, whatever its light.
+        for (bar, &glare) in bars.iter_mut().zip(&steps.glares) {
+            *bar &= !glare;
+        }
+        let barred = bars.iter().filter(|&&b| b).count();
+        // Their mid levels still say where the disc's inside is dark: the
+        // glare's skirt lifts the disc's levels beside the streak. Each is
+        // kept with its point (undistorted pixels) and turned into an angle
+        // about the fitted ellipse for the fill test.
+        let mut glare_steps: Vec<([f64; 2], FillLevels)> = Vec::new();
+        if glares_dropped {
+            glare_steps = (0..steps.len())
+                .filter(|&i| steps.glares[i])
+                .map(|i| {
+                    (
+                        steps.undistorted[i],
+                        FillLevels::of_step(steps.mid_levels[i], steps.contrasts[i]),
+                    )
+                })
+                .collect();
+        }
+        let dropped: Vec<bool> = steps
+            .glares
+            .iter()
+            .zip(&bars)
+            .map(|(&glare, &bar)| (glares_dropped && glare) || (2 * barred < bars.len() && bar))
+            .collect();
+        steps.drop_marked(&dropped);
+        GlareDrop {
+            glare_steps,
+            glares_dropped,
+            glared: if glares_dropped { glared } else { 0 },
+        }
+    }
+
     /// [`Self::rim_pass`]; `cover` says whether a glare hides most of the
     /// rim, so that the pass looks again, closer, at what it leaves.
     fn rim_pass_at(
@@ -578,211 +896,29 @@ impl Detector {
         let perimeter = TAU * ((start.a * start.a + start.b * start.b) / 2.0).sqrt();
         let rays =
             ((perimeter / spacing_px.max(0.1)) as usize).clamp(24, max_points.max(24) as usize);
-        let min_contrast = self.cfg.min_contrast_gray as f32;
-        let (w, h) = (f64::from(image.width()), f64::from(image.height()));
-        let inside = |p: [f64; 2]| p[0] >= 0.0 && p[1] >= 0.0 && p[0] <= w - 1.0 && p[1] <= h - 1.0;
 
         // A blurred rim is a ramp as wide as the blur: where most steps run
         // into the window's ends, their levels are not the disc's and the
         // canopy's, and the window is widened (the mid-level crossing of a
         // whole blurred step is the edge).
         let mut widen = 1.0;
-        let (mut points_px, mut undistorted, mut contrasts, mut mid_levels, mut widths);
-        let mut shading: Vec<ShadedEdge>;
-        let mut measured_base: Vec<[f64; 2]>;
-        let mut faint = Vec::new();
-        let mut rays_in_image;
-        let mut clipped_share;
-        let mut glares: Vec<bool>;
-        loop {
-            points_px = Vec::with_capacity(rays);
-            undistorted = Vec::with_capacity(rays);
-            // Filled on the measuring pass only.
-            let measuring = if rim_use == RimUse::Measure { rays } else { 0 };
-            shading = Vec::with_capacity(measuring);
-            measured_base = Vec::with_capacity(measuring);
-            contrasts = Vec::with_capacity(rays);
-            mid_levels = Vec::with_capacity(rays);
-            widths = Vec::with_capacity(rays);
-            rays_in_image = 0usize;
-            glares = Vec::with_capacity(rays);
-            let mut clipped = 0usize;
-            let (sin_theta, cos_theta) = start.theta.sin_cos();
-            for dir in ray_directions(rays) {
-                // The ray's angle to the major axis: phi - theta.
-                let (cos_local, sin_local) = (
-                    dir[0] * cos_theta + dir[1] * sin_theta,
-                    dir[1] * cos_theta - dir[0] * sin_theta,
-                );
-                let r = polar_radius_local(start.a, start.b, cos_local, sin_local);
-                let base = (self.cfg.rim_search_fraction * r)
-                    .clamp(4.0, self.cfg.rim_search_max_px.max(4.0));
-                let margin = if widen > 1.0 {
-                    (base * widen)
-                        .min(MAX_WIDE_MARGIN_RADII * r)
-                        .min(MAX_WIDE_MARGIN_PX)
-                        .max(base)
-                } else {
-                    base
-                };
-                let (s0, s1) = ((r - margin).max(0.5), r + margin);
-                let far = [centre[0] + s1 * dir[0], centre[1] + s1 * dir[1]];
-                let near = [centre[0] + s0 * dir[0], centre[1] + s0 * dir[1]];
-                if !(inside(far) && inside(near)) {
-                    continue;
-                }
-                rays_in_image += 1;
-                rim::profile(image, centre, dir, s0, s1, 0.5, &mut self.profile);
-                // In noise, the step is located on the smoothed profile: its
-                // ends and levels are then the step's, not the noise's.
-                let cap = (0.1 * r) as usize;
-                let half = self.smooth_half.min(cap);
-                if half > 0 {
-                    self.raw_profile.clone_from(&self.profile);
-                    rim::smooth(&mut self.profile, half, &mut self.scratch);
-                }
-                let mut half = half;
-                let mut found = rim::strongest_rise(&self.profile, s0, 0.5, min_contrast);
-                // A long blurred ramp rises little per sample: smoothed
-                // only for the frame's noise, its rise dips below the fade
-                // level inside the ramp, which then ends there and takes
-                // its levels inside it (the rim comes out too far out along
-                // the blur). On a pass whose window was widened for blur,
-                // a step is found again on a profile smoothed for its own
-                // rise, twice at most (the first width is short for the
-                // same reason). Not a step into saturated pixels: a glare
-                // streak's skirt is no blur.
-                let ramp_rounds = if widen > 1.0 { 2 } else { 0 };
-                for _ in 0..ramp_rounds {
-                    let Some(e) = found else { break };
-                    let raw = if half > 0 {
-                        &self.raw_profile
-                    } else {
-                        &self.profile
-                    };
-                    if glare_on_light_side(raw, s0, 0.5, &e) {
-                        break;
-                    }
-                    let width = 2.0 * (e.light_s - e.s) - self.smoothing_spread_px[half];
-                    let ramp_half = smoothing_half_for_ramp(
-                        self.noise_gray,
-                        f64::from(e.light - e.dark),
-                        width,
-                    )
-                    .min(cap);
-                    if ramp_half <= half {
-                        break;
-                    }
-                    if half == 0 {
-                        self.raw_profile.clone_from(&self.profile);
-                    }
-                    self.profile.clone_from(&self.raw_profile);
-                    rim::smooth(&mut self.profile, ramp_half, &mut self.scratch);
-                    half = ramp_half;
-                    found = rim::strongest_rise(&self.profile, s0, 0.5, min_contrast);
-                }
-                if let Some(mut e) = found {
-                    // A step into saturated pixels is most likely the skirt
-                    // of a glare streak lying over the disc: its width says
-                    // nothing of blur, and unless most steps are such, it
-                    // gives no rim point (below).
-                    let raw = if half > 0 {
-                        &self.raw_profile
-                    } else {
-                        &self.profile
-                    };
-                    let glare = glare_on_light_side(raw, s0, 0.5, &e)
-                        || (cover == GlareCover::Most && glare_before_step(raw, s0, 0.5, &e));
-                    if half > 0 {
-                        let mid = 0.5 * (e.dark + e.light);
-                        let reach = 0.5 * self.smoothing_spread_px[half] + 1.0;
-                        if let Some(s) =
-                            rim::crossing_near(&self.raw_profile, s0, 0.5, mid, e.s, reach)
-                        {
-                            e.s = s;
-                        }
-                    }
-                    let p = [centre[0] + e.s * dir[0], centre[1] + e.s * dir[1]];
-                    points_px.push(p);
-                    undistorted.push(self.camera.undistort_px(p));
-                    if rim_use == RimUse::Measure {
-                        let (measured, light_slope) =
-                            self.measured_edge(&e, half, cap, s0, &mut faint);
-                        measured_base.push([
-                            centre[0] + measured.s * dir[0],
-                            centre[1] + measured.s * dir[1],
-                        ]);
-                        shading.push(ShadedEdge::new(dir, &measured, light_slope));
-                    }
-                    contrasts.push(f64::from(e.light - e.dark));
-                    mid_levels.push(0.5 * (e.dark + e.light));
-                    // The smoothing's own spread is not the step's.
-                    let spread = self.smoothing_spread_px[half];
-                    widths.push((2.0 * (e.light_s - e.s) - spread).max(0.0));
-                    clipped += usize::from(e.clipped && !glare);
-                    glares.push(glare);
-                }
-            }
-            tracing::trace!(
-                rays,
-                rays_in_image,
-                edges = points_px.len(),
-                clipped,
-                widen,
-                "rim pass"
-            );
-            clipped_share = clipped as f64 / points_px.len().max(1) as f64;
-            if widen >= MAX_WIDEN || clipped_share <= CLIPPED_SHARE {
-                break;
+        let RayRound {
+            mut steps,
+            mut rays_in_image,
+            clipped_share,
+        } = loop {
+            let round = self.ray_steps(image, start, centre, rays, widen, rim_use, cover);
+            if widen >= MAX_WIDEN || round.clipped_share <= CLIPPED_SHARE {
+                break round;
             }
             widen *= WIDEN_STEP;
-        }
-        // Steps into saturated pixels (a glare streak over the disc) give
-        // no rim points and do not count against the candidate, unless
-        // they are most of the rim (an overexposed canopy).
-        let glared = glares.iter().filter(|&&g| g).count();
-        let glares_dropped = glared > 0 && 2 * glared < glares.len();
-        // Steps onto a light bar over the disc give no rim points either,
-        // but count against it as an occluder's would: the disc's rim is
-        // hidden there, and a sliver of the disc beside the bar must not
-        // score as a whole disc.
-        let mut bars = self.light_bars(image, centre, &points_px, &contrasts, &mid_levels, start.b);
-        // A step into saturation is the glare's, whatever its light.
-        for (bar, &glare) in bars.iter_mut().zip(&glares) {
-            *bar &= !glare;
-        }
-        let barred = bars.iter().filter(|&&b| b).count();
-        // Their mid levels still say where the disc's inside is dark: the
-        // glare's skirt lifts the disc's levels beside the streak. Each is
-        // kept with its point (undistorted pixels) and turned into an angle
-        // about the fitted ellipse for the fill test.
-        let mut glare_steps: Vec<([f64; 2], FillLevels)> = Vec::new();
-        if glares_dropped {
-            glare_steps = (0..glares.len())
-                .filter(|&i| glares[i])
-                .map(|i| {
-                    (
-                        undistorted[i],
-                        FillLevels::of_step(mid_levels[i], contrasts[i]),
-                    )
-                })
-                .collect();
-            rays_in_image -= glared;
-        }
-        let dropped: Vec<bool> = (0..glares.len())
-            .map(|i| (glares_dropped && glares[i]) || (2 * barred < bars.len() && bars[i]))
-            .collect();
-        if dropped.iter().any(|&d| d) {
-            drop_marked(&mut points_px, &dropped);
-            drop_marked(&mut undistorted, &dropped);
-            drop_marked(&mut contrasts, &dropped);
-            drop_marked(&mut mid_levels, &dropped);
-            drop_marked(&mut widths, &dropped);
-            if rim_use == RimUse::Measure {
-                drop_marked(&mut measured_base, &dropped);
-                drop_marked(&mut shading, &dropped);
-            }
-        }
+        };
+        let GlareDrop {
+            glare_steps,
+            glares_dropped,
+            glared,
+        } = self.drop_glares_and_bars(image, centre, &mut steps, start.b);
+        rays_in_image -= glared;
         if rays_in_image < rays / 4 {
             return Err(Reject::OutOfImage);
         }
@@ -798,37 +934,20 @@ impl Detector {
                 Err(short)
             }
         };
+        let undistorted = &steps.undistorted;
         if undistorted.len() < self.cfg.min_rim_points as usize {
             return closer_or(self, Reject::FewEdges(undistorted.len()));
         }
-        let min_tol = self.cfg.inlier_tolerance_px.max(0.1);
-        let coarse_tol = (0.05 * start.b).max(3.0 * min_tol);
-        let coarse =
-            conic_fit::refine(start, &undistorted, coarse_tol, 2).ok_or(Reject::NoEllipse)?;
-        // The edges' own scatter sets what is "on the rim": a blurred rim in
-        // noise is located to a pixel or two (noise over the ramp's slope),
-        // a sharp one to a tenth.
         let mut residuals = Vec::new();
-        conic_fit::residuals(&coarse, &undistorted, &mut residuals);
-        let mut near: Vec<f64> = residuals
-            .iter()
-            .copied()
-            .filter(|r| *r <= coarse_tol)
-            .collect();
-        let sigma = 1.4826 * median(&mut near);
-        let tol = (NOISE_TOLERANCE_SIGMAS * sigma).clamp(min_tol, (0.5 * coarse_tol).max(min_tol));
-        let ellipse = conic_fit::refine(&coarse, &undistorted, tol, 2).ok_or(Reject::NoEllipse)?;
-        if !self.plausible(&ellipse, 1.0) {
-            return Err(Reject::Implausible);
-        }
-        conic_fit::residuals(&ellipse, &undistorted, &mut residuals);
+        let (ellipse, tol) = self.narrow_fit(start, undistorted, &mut residuals)?;
+        conic_fit::residuals(&ellipse, undistorted, &mut residuals);
         let inliers: Vec<usize> = (0..residuals.len())
             .filter(|&i| residuals[i] <= tol)
             .collect();
         if inliers.len() < self.cfg.min_rim_points as usize {
             return closer_or(self, Reject::FewInliers(inliers.len()));
         }
-        let mut inlier_contrast: Vec<f64> = inliers.iter().map(|&i| contrasts[i]).collect();
+        let mut inlier_contrast: Vec<f64> = inliers.iter().map(|&i| steps.contrasts[i]).collect();
         let rim_contrast = median(&mut inlier_contrast);
         if rim_contrast < self.cfg.min_contrast_gray {
             return Err(Reject::LowContrast(rim_contrast));
@@ -841,13 +960,13 @@ impl Detector {
             .map(|&i| {
                 let p = undistorted[i];
                 let angle = (p[1] - ellipse.cy).atan2(p[0] - ellipse.cx);
-                (angle, mid_levels[i])
+                (angle, steps.mid_levels[i])
             })
             .collect();
         let mut fill_steps: Vec<(f64, FillLevels)> = inliers
             .iter()
             .zip(&mids)
-            .map(|(&i, &(angle, mid))| (angle, FillLevels::of_step(mid, contrasts[i])))
+            .map(|(&i, &(angle, mid))| (angle, FillLevels::of_step(mid, steps.contrasts[i])))
             .collect();
         fill_steps.extend(
             glare_steps
@@ -862,9 +981,17 @@ impl Detector {
             return Err(Reject::LightInside(fill));
         }
         let shape = inliers.len() as f64 / rays_in_image as f64;
+        let RaySteps {
+            points_px,
+            undistorted,
+            widths_px,
+            measured_px,
+            shading,
+            ..
+        } = steps;
         let pose_edges = match rim_use {
             RimUse::Measure => PoseEdges::Shaded {
-                base_px: measured_base,
+                base_px: measured_px,
                 shading,
             },
             RimUse::Scout => PoseEdges::Own(undistorted),
@@ -876,7 +1003,7 @@ impl Detector {
             pose_edges,
             residuals,
             inliers,
-            step_widths_px: widths,
+            step_widths_px: widths_px,
             clipped_share,
             rim_contrast,
             shape,
