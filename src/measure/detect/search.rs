@@ -216,8 +216,47 @@ impl Detector {
     /// order tried; the search ends at the first that scores `accept` or
     /// that its canopy confirms ([`ends_search`]).
     pub(super) fn verify_candidates(&mut self, image: &GrayImage, accept: f64) -> Vec<Verified> {
+        // The dark regions and the edges are both found on the decimated
+        // frame.
         self.decimated
             .update(image, self.cfg.decimation.clamp(1, 16) as usize);
+        let mut verified: Vec<Verified> = Vec::new();
+        let mut tried: Vec<Seed> = Vec::new();
+        let regions = self.try_dark_regions(image, accept, &mut tried, &mut verified);
+        // The edge source, when the dark regions gave no clear drogue: a
+        // disc merged with the hose, probe or a glare streak, or washed out
+        // by haze, still has its rim.
+        if !any_accepted(&verified, accept) {
+            self.try_edge_source(image, accept, &mut tried, &mut verified);
+        }
+        // The third source, when neither gave a clear drogue: dark regions
+        // relative to their own neighbourhood (a disc that haze, vignetting
+        // or a glare's halo lifted above every global threshold).
+        if self.cfg.local_contrast_source && !any_accepted(&verified, accept) {
+            self.try_local_contrast(image, accept, &mut tried, &mut verified);
+        }
+        tracing::debug!(
+            regions = regions,
+            seeds = tried.len(),
+            verified = verified.len(),
+            best = ?verified.iter().map(|v| v.score).max_by(f64::total_cmp),
+            "full-frame search"
+        );
+        verified
+    }
+
+    /// The first source: the dark regions of the decimated frame at the
+    /// configured thresholds, seeded within a budget of regions (below),
+    /// until a candidate scores `accept` or its canopy confirms it. Seeds
+    /// go into `tried`, candidates that verify into `verified`; returns how
+    /// many regions were tried.
+    fn try_dark_regions(
+        &mut self,
+        image: &GrayImage,
+        accept: f64,
+        tried: &mut Vec<Seed>,
+        verified: &mut Vec<Verified>,
+    ) -> usize {
         let f = self.decimated.factor as f64;
         // Smallest disc: a third of its area must make dark blocks.
         let min_area = ((std::f64::consts::PI * (self.min_radius_px / f).powi(2)) / 3.0)
@@ -252,8 +291,6 @@ impl Detector {
         // budget before a disc (or the part of it a glare streak leaves) is
         // tried.
         let mut kept: Vec<Blob> = Vec::new();
-        let mut verified: Vec<Verified> = Vec::new();
-        let mut tried: Vec<Seed> = Vec::new();
         let mut regions = 0usize;
         let (mut from, mut budget, mut offset) = (0, self.cfg.max_candidates as usize, 0);
         let mut refunded = false;
@@ -314,7 +351,7 @@ impl Detector {
                     // in the size order and its kind, not by the order of
                     // trying.
                     let stream = 3 * (offset + k) as u64 + seed.kind as u64;
-                    match self.try_seed(image, seed, stream, accept, &mut verified) {
+                    match self.try_seed(image, seed, stream, accept, verified) {
                         Ok(true) => break 'batches,
                         Err(Reject::NoRim(_)) => {}
                         _ => {
@@ -337,78 +374,64 @@ impl Detector {
             };
             refunded = true;
         }
-        // The edge source, when the dark regions gave no clear drogue: a
-        // disc merged with the hose, probe or a glare streak, or washed out
-        // by haze, still has its rim.
-        if !any_accepted(&verified, accept) {
-            let circles = self.voter.find(
-                &self.decimated,
-                self.cfg.min_contrast_gray,
-                self.min_radius_px,
-                self.max_radius_px,
-                EDGE_SEEDS,
-            );
-            let first = EdgeSeeds {
-                reach: UNSURE_SEED_REACH,
-                from: 0.0,
-                kind: 3,
-                stream: 1000,
-            };
-            self.try_edge_circles(image, &circles, first, accept, &mut tried, &mut verified);
-            // Circles nested with those (the disc around the probe's tip),
-            // when still no candidate scored `accept`: their first pass
-            // starts inside their own rim, so that it does not take the
-            // smaller circle's rim again. A weaker candidate verified
-            // before (the probe's tip, a small dark spot judged without
-            // its canopy) does not stop them: the best score is the answer.
-            if !any_accepted(&verified, accept) {
-                let nested = self.voter.nested(&self.decimated, &circles, NESTED_SEEDS);
-                let around = EdgeSeeds {
-                    reach: OWN_RIM_REACH,
-                    from: OWN_RIM_FROM,
-                    kind: 8,
-                    stream: 1500,
-                };
-                self.try_edge_circles(image, &nested, around, accept, &mut tried, &mut verified);
-            }
-            // The first circles again, their first pass starting past
-            // what lies inside them, when still none scored `accept`: the
-            // probe's tip over the middle of a hazed disc is darker than
-            // the disc, its outline the strongest step from any point
-            // inside, and the tip is dropped as a circle inside a larger
-            // dark shape ([`super::Reject::Nested`]).
-            if !any_accepted(&verified, accept) {
-                let past_inside = EdgeSeeds {
-                    reach: OWN_RIM_REACH,
-                    from: OWN_RIM_FROM,
-                    kind: 9,
-                    stream: 1700,
-                };
-                self.try_edge_circles(
-                    image,
-                    &circles,
-                    past_inside,
-                    accept,
-                    &mut tried,
-                    &mut verified,
-                );
-            }
-        }
-        // The third source, when neither gave a clear drogue: dark regions
-        // relative to their own neighbourhood (a disc that haze, vignetting
-        // or a glare's halo lifted above every global threshold).
-        if self.cfg.local_contrast_source && !any_accepted(&verified, accept) {
-            self.try_local_contrast(image, accept, &mut tried, &mut verified);
-        }
-        tracing::debug!(
-            regions = regions,
-            seeds = tried.len(),
-            verified = verified.len(),
-            best = ?verified.iter().map(|v| v.score).max_by(f64::total_cmp),
-            "full-frame search"
-        );
         self.blobs = blobs;
-        verified
+        regions
+    }
+
+    /// The second source: the edge voter's circles, tried as seeds in
+    /// three ways until one scores `accept` (seeds tried before skipped).
+    fn try_edge_source(
+        &mut self,
+        image: &GrayImage,
+        accept: f64,
+        tried: &mut Vec<Seed>,
+        verified: &mut Vec<Verified>,
+    ) {
+        let circles = self.voter.find(
+            &self.decimated,
+            self.cfg.min_contrast_gray,
+            self.min_radius_px,
+            self.max_radius_px,
+            EDGE_SEEDS,
+        );
+        let first = EdgeSeeds {
+            reach: UNSURE_SEED_REACH,
+            from: 0.0,
+            kind: 3,
+            stream: 1000,
+        };
+        self.try_edge_circles(image, &circles, first, accept, tried, verified);
+        // Circles nested with those (the disc around the probe's tip),
+        // when still no candidate scored `accept`: their first pass
+        // starts inside their own rim, so that it does not take the
+        // smaller circle's rim again. A weaker candidate verified
+        // before (the probe's tip, a small dark spot judged without
+        // its canopy) does not stop them: the best score is the answer.
+        if !any_accepted(verified, accept) {
+            let nested = self.voter.nested(&self.decimated, &circles, NESTED_SEEDS);
+            let around = EdgeSeeds {
+                reach: OWN_RIM_REACH,
+                from: OWN_RIM_FROM,
+                kind: 8,
+                stream: 1500,
+            };
+            self.try_edge_circles(image, &nested, around, accept, tried, verified);
+        }
+        // The first circles again, their first pass starting past
+        // what lies inside them, when still none scored `accept`: the
+        // probe's tip over the middle of a hazed disc is darker than
+        // the disc, its outline the strongest step from any point
+        // inside, and the tip is dropped as a circle inside a larger
+        // dark shape ([`super::Reject::Nested`]).
+        if !any_accepted(verified, accept) {
+            let past_inside = EdgeSeeds {
+                reach: OWN_RIM_REACH,
+                from: OWN_RIM_FROM,
+                kind: 9,
+                stream: 1700,
+            };
+            self.try_edge_circles(image, &circles, past_inside, accept, tried, verified);
+        }
     }
 
     /// Tries the edge source's `circles` as seeds of `how`, strongest
