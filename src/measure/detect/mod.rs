@@ -483,13 +483,7 @@ impl Detector {
             } else {
                 self.noise_age += 1;
             }
-            match self.verify_settled(
-                image,
-                h,
-                self.cfg.tracked_rim_point_spacing_px,
-                self.cfg.tracked_max_rim_points,
-                RimUse::Measure,
-            ) {
+            match self.verify_tracked(image, h) {
                 Ok(v) => return Ok(v.into_candidate()),
                 Err(why) => tracing::debug!(?why, "not at the tracked ellipse: full search"),
             }

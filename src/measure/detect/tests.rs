@@ -1389,3 +1389,28 @@ fn a_glare_skirt_beside_its_saturated_core_does_not_count_as_light_inside() {
         assert_near(&cand.ellipse_px, &truth, 1.0, 1.0);
     }
 }
+
+/// A tracked frame's pass counts as settled once it moved by a quarter of
+/// its narrowest window: the steps a window centred that far off finds are
+/// those a centred one finds. From a prediction 0.9 px off in centre and
+/// size (the window here is 4 px each way, so one pass is kept), the rim
+/// gives the disc as from the exact prediction.
+#[test]
+fn a_tracked_pass_from_a_prediction_a_pixel_off_measures_the_same_rim() {
+    let (w, h) = (400, 300);
+    let cam = camera(w, h);
+    let truth = Ellipse::new(201.3, 152.6, 40.0, 34.0, 0.3);
+    let img = Scene::new(truth).render(w, h, 2.0, 11);
+    let mut det = detector(&cam);
+    let exact = det.verify_tracked(&img, &truth).expect("verified");
+    let off = Ellipse::new(202.2, 151.7, 40.9, 34.9, 0.3);
+    let moved = det.verify_tracked(&img, &off).expect("verified");
+    let fitted = |v: &super::Verified| conic_fit::fit_ellipse(&v.points_px).unwrap();
+    let (from_exact, from_off) = (fitted(&exact), fitted(&moved));
+    assert_near(&from_exact, &truth, 0.05, 0.05);
+    assert_near(&from_off, &truth, 0.05, 0.05);
+    assert!(
+        from_off.max_param_error_px(&from_exact) < 0.02,
+        "{from_off:?} against {from_exact:?}"
+    );
+}

@@ -61,6 +61,19 @@ const MAX_STRAIGHT_EDGES: usize = 2;
 /// would end as the first's did. Not [`SAME_RIM`]: narrow passes started
 /// 5 % apart can settle on different edges (a probe's and the disc's).
 const SAME_WIDE_FIT: f64 = 0.01;
+/// A narrow pass whose ellipse moved by no more than this from its start
+/// (centre or axis, pixels) has settled: candidates are compared, and their
+/// ellipses checked against the fit, on settled rims.
+const SETTLED_MOVE_PX: f64 = 0.5;
+/// On a tracked frame, a pass has settled once it moved by no more than
+/// this share of its narrowest window's half-width (at least
+/// [`SETTLED_MOVE_PX`]): each ray's window is centred on the predicted rim,
+/// and a step found this far from the centre lies well inside it, so that
+/// a pass centred on it finds the same step (the window is at least 4 px
+/// each way, a sharp step about 1.3 px each way of its middle). A near
+/// drogue moves more than half a pixel between frames; repeating its pass
+/// for that was a tenth of a tracked frame's work.
+const SETTLED_WINDOW_SHARE: f64 = 0.25;
 /// Samples per seed radius on the rays of a seed's wide first pass.
 const WIDE_STEPS_PER_RADIUS: f64 = 40.0;
 /// A light bar over the disc ends within this share of the gap between
@@ -395,6 +408,7 @@ impl Detector {
             self.scout_spacing_px(),
             self.cfg.max_rim_points,
             RimUse::Scout,
+            SETTLED_MOVE_PX,
         )?;
         // A seed that settles on a candidate's rim is that candidate: its
         // evidence (the canopy test above all) is not taken again.
@@ -468,7 +482,35 @@ impl Detector {
         max_points: u32,
         rim_use: RimUse,
     ) -> Result<Verified, Reject> {
-        let pass = self.settled_pass(image, start, spacing_px, max_points, rim_use)?;
+        let pass = self.settled_pass(
+            image,
+            start,
+            spacing_px,
+            max_points,
+            rim_use,
+            SETTLED_MOVE_PX,
+        )?;
+        self.score(image, pass)
+    }
+
+    /// [`Self::verify_settled`] at a tracked frame's predicted ellipse,
+    /// which verifies and measures in one pass: settled once it moves by a
+    /// quarter of its narrowest window or less ([`SETTLED_WINDOW_SHARE`]).
+    pub(super) fn verify_tracked(
+        &mut self,
+        image: &GrayImage,
+        predicted: &Ellipse,
+    ) -> Result<Verified, Reject> {
+        let narrowest_window = (self.cfg.rim_search_fraction * predicted.b)
+            .clamp(4.0, self.cfg.rim_search_max_px.max(4.0));
+        let pass = self.settled_pass(
+            image,
+            predicted,
+            self.cfg.tracked_rim_point_spacing_px,
+            self.cfg.tracked_max_rim_points,
+            RimUse::Measure,
+            (SETTLED_WINDOW_SHARE * narrowest_window).max(SETTLED_MOVE_PX),
+        )?;
         self.score(image, pass)
     }
 
@@ -494,7 +536,7 @@ impl Detector {
     }
 
     /// [`Self::rim_pass`], repeated from its own result while that moves by
-    /// more than half a pixel (the narrow search is centred on the start
+    /// more than `settled_px` (the narrow search is centred on the start
     /// ellipse: a start a few pixels off gives edges near the window's
     /// ends), at most three times. The evidence (the canopy's rim, a second
     /// ray pass) is looked at only on the pass that is kept.
@@ -505,11 +547,12 @@ impl Detector {
         spacing_px: f64,
         max_points: u32,
         rim_use: RimUse,
+        settled_px: f64,
     ) -> Result<RimPass, Reject> {
         let mut previous = *start;
         for round in 0..3 {
             let pass = self.rim_pass(image, &previous, spacing_px, max_points, rim_use)?;
-            if round == 2 || pass.ellipse.max_param_error_px(&previous) <= 0.5 {
+            if round == 2 || pass.ellipse.max_param_error_px(&previous) <= settled_px {
                 return Ok(pass);
             }
             previous = pass.ellipse;
