@@ -72,7 +72,7 @@ const SETTLED_MOVE_PX: f64 = 0.5;
 /// a pass centred on it finds the same step (the window is at least 4 px
 /// each way, a sharp step about 1.3 px each way of its middle). A near
 /// drogue moves more than half a pixel between frames; repeating its pass
-/// for that was a tenth of a tracked frame's work.
+/// for that was about 8 % of a near tracked frame's instructions.
 const SETTLED_WINDOW_SHARE: f64 = 0.25;
 /// Samples per seed radius on the rays of a seed's wide first pass.
 const WIDE_STEPS_PER_RADIUS: f64 = 40.0;
