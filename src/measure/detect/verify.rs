@@ -501,8 +501,7 @@ impl Detector {
         image: &GrayImage,
         predicted: &Ellipse,
     ) -> Result<Verified, Reject> {
-        let narrowest_window = (self.cfg.rim_search_fraction * predicted.b)
-            .clamp(4.0, self.cfg.rim_search_max_px.max(4.0));
+        let narrowest_window = self.narrow_window_px(predicted.b);
         let pass = self.settled_pass(
             image,
             predicted,
@@ -684,6 +683,14 @@ impl Detector {
         )
     }
 
+    /// Half-width of a narrow pass's window on a ray to a rim `radius_px`
+    /// away (pixels): [`DetectConfig::rim_search_fraction`](super::DetectConfig)
+    /// of it, 4 px at least and `rim_search_max_px` at most, before any
+    /// widening for blur.
+    fn narrow_window_px(&self, radius_px: f64) -> f64 {
+        (self.cfg.rim_search_fraction * radius_px).clamp(4.0, self.cfg.rim_search_max_px.max(4.0))
+    }
+
     /// One round of a narrow pass: a step looked for on each of `rays`
     /// rays from `centre` (distorted pixels), in a window about `start`'s
     /// rim widened by `widen` (see [`Self::rim_pass_at`]).
@@ -713,8 +720,7 @@ impl Detector {
                 dir[1] * cos_theta - dir[0] * sin_theta,
             );
             let r = polar_radius_local(start.a, start.b, cos_local, sin_local);
-            let base =
-                (self.cfg.rim_search_fraction * r).clamp(4.0, self.cfg.rim_search_max_px.max(4.0));
+            let base = self.narrow_window_px(r);
             let margin = if widen > 1.0 {
                 (base * widen)
                     .min(MAX_WIDE_MARGIN_RADII * r)
