@@ -169,6 +169,78 @@ fn same_file(a: &Path, b: &Path) -> bool {
     }
 }
 
+/// Largest summary section read for its schemas and channels (they are a
+/// few kB; the chunk indexes beside them grow with the log, about 150 bytes
+/// a chunk).
+const SUMMARY_LIMIT_BYTES: u64 = 64 << 20;
+
+/// The schema and channel records (opcode, body) of the summary section of
+/// the MCAP file `file` (`len` bytes), when it ends with a footer that
+/// points to a summary whose CRC holds; none otherwise (a cut file, a
+/// damaged summary).
+fn summary_schemas_and_channels(file: &mut File, len: u64) -> Vec<(u8, Vec<u8>)> {
+    // Footer record: opcode, length, summary start and offset start (u64
+    // each), summary CRC (u32); then the closing magic.
+    const FOOTER_FIELDS: u64 = 8 + 8 + 4;
+    const TAIL: u64 = 1 + 8 + FOOTER_FIELDS + 8;
+    let read_at = |file: &mut File, at: u64, n: u64| -> Option<Vec<u8>> {
+        let mut buf = vec![0u8; usize::try_from(n).ok()?];
+        file.seek(SeekFrom::Start(at)).ok()?;
+        std::io::Read::read_exact(file, &mut buf).ok()?;
+        Some(buf)
+    };
+    let Some(tail) = len.checked_sub(TAIL).and_then(|at| read_at(file, at, TAIL)) else {
+        return Vec::new();
+    };
+    let u64_at = |b: &[u8], i: usize| u64::from_le_bytes(b[i..i + 8].try_into().unwrap_or([0; 8]));
+    if tail[0] != op::FOOTER || &tail[tail.len() - 8..] != mcap::MAGIC {
+        return Vec::new();
+    }
+    let (summary_start, offsets_start) = (u64_at(&tail, 9), u64_at(&tail, 17));
+    let crc = u32::from_le_bytes(tail[25..29].try_into().unwrap_or([0; 4]));
+    let footer_at = len - TAIL;
+    let end = if offsets_start > 0 {
+        offsets_start
+    } else {
+        footer_at
+    };
+    if summary_start == 0 || summary_start >= end || end > footer_at {
+        return Vec::new();
+    }
+    if end - summary_start > SUMMARY_LIMIT_BYTES {
+        return Vec::new();
+    }
+    let Some(summary) = read_at(file, summary_start, footer_at - summary_start) else {
+        return Vec::new();
+    };
+    // The CRC runs from the summary's start to the footer's offset start.
+    if crc != 0 {
+        let mut h = crc32fast::Hasher::new();
+        h.update(&summary);
+        h.update(&tail[..25]);
+        if h.finalize() != crc {
+            return Vec::new();
+        }
+    }
+    let mut records = Vec::new();
+    let mut at = 0usize;
+    let section = &summary[..usize::try_from(end - summary_start).unwrap_or(0)];
+    while let Some(head) = section.get(at..at + 9) {
+        let opcode = head[0];
+        let Ok(n) = usize::try_from(u64_at(head, 1)) else {
+            break;
+        };
+        let Some(body) = section.get(at + 9..(at + 9).saturating_add(n)) else {
+            break;
+        };
+        if opcode == op::SCHEMA || opcode == op::CHANNEL {
+            records.push((opcode, body.to_vec()));
+        }
+        at += 9 + n;
+    }
+    records
+}
+
 /// Copies every message `input` still holds into a new complete file
 /// `output` (zstd chunks). Fails when `input` is missing or not an MCAP file
 /// ([`LogError::Format`]), when `output` is the input or cannot be written
@@ -222,6 +294,15 @@ pub fn recover(input: &Path, output: &Path) -> Result<RecoverReport, LogError> {
         out_channel: HashMap::new(),
         report: RecoverReport::default(),
     };
+    // A channel whose record a damaged chunk took with it is still known
+    // from the summary, when the file has one: its messages in the other
+    // chunks are kept.
+    if let Ok(mut file) = File::open(input) {
+        for (opcode, body) in summary_schemas_and_channels(&mut file, len) {
+            c.record(opcode, &body)
+                .map_err(|e| LogError::io(output, e))?;
+        }
+    }
     let out_err = |e: String| LogError::io(output, e);
     let mut footer_seen = false;
     // The damaged chunk whose message indexes are being counted.
@@ -484,4 +565,65 @@ fn recover_in_place(path: &Path, keep_cut: bool) -> Result<RecoverReport, LogErr
     }
     std::fs::rename(&tmp, path).map_err(|e| LogError::io(&tmp, e))?;
     Ok(report)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::collections::BTreeMap;
+    use std::sync::Arc;
+
+    /// A small complete MCAP file with one schema and two channels, and a
+    /// message on each.
+    fn small_log(path: &Path) {
+        let mut w = mcap::Writer::new(BufWriter::new(File::create(path).unwrap())).unwrap();
+        let schema = Arc::new(mcap::Schema {
+            id: 1,
+            name: "s".into(),
+            encoding: "jsonschema".into(),
+            data: std::borrow::Cow::Borrowed(b"{}"),
+        });
+        for (id, topic) in [(1u16, "/a"), (2, "/b")] {
+            let channel = Arc::new(mcap::Channel {
+                id,
+                topic: topic.into(),
+                schema: Some(Arc::clone(&schema)),
+                message_encoding: "json".into(),
+                metadata: BTreeMap::new(),
+            });
+            w.write(&mcap::Message {
+                channel,
+                sequence: 0,
+                log_time: 1,
+                publish_time: 1,
+                data: std::borrow::Cow::Borrowed(b"{}"),
+            })
+            .unwrap();
+        }
+        w.finish().unwrap();
+    }
+
+    #[test]
+    fn the_summary_gives_its_schemas_and_channels_and_nothing_when_damaged() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("small.mcap");
+        small_log(&path);
+        let len = std::fs::metadata(&path).unwrap().len();
+        let found = summary_schemas_and_channels(&mut File::open(&path).unwrap(), len);
+        let opcodes: Vec<u8> = found.iter().map(|(o, _)| *o).collect();
+        assert_eq!(opcodes, [op::SCHEMA, op::CHANNEL, op::CHANNEL]);
+        // A byte of the summary changed: its CRC fails, nothing is taken.
+        let mut bytes = std::fs::read(&path).unwrap();
+        let summary_start = mcap::read::footer(&bytes).unwrap().summary_start as usize;
+        bytes[summary_start + 12] ^= 0x20;
+        let damaged = dir.path().join("damaged.mcap");
+        std::fs::write(&damaged, &bytes).unwrap();
+        let mut f = File::open(&damaged).unwrap();
+        assert!(summary_schemas_and_channels(&mut f, len).is_empty());
+        // Cut before its end: no footer, nothing.
+        let cut = dir.path().join("cut.mcap");
+        std::fs::write(&cut, &std::fs::read(&path).unwrap()[..len as usize - 5]).unwrap();
+        let mut f = File::open(&cut).unwrap();
+        assert!(summary_schemas_and_channels(&mut f, len - 5).is_empty());
+    }
 }
