@@ -27,13 +27,25 @@ use std::time::{Duration, Instant};
 /// Frames `k - 1` and `k` (the track) and `k + 1` (measured) of a scenario
 /// for each pick, with a measurer set up for the scenario's camera and mount.
 fn frame_triples(scenario: &str, picks: &[usize]) -> (Measurer, Vec<([Frame; 2], Frame)>) {
-    let mut sim = Simulator::new(Scenario::builtin(scenario).unwrap()).unwrap();
+    frame_triples_of(Scenario::builtin(scenario).unwrap(), scenario, picks, None)
+}
+
+/// [`frame_triples`] of `scenario` (its frames written under `name`), the
+/// measurer told the camera's exposure time `exposure_ms` when given.
+fn frame_triples_of(
+    scenario: Scenario,
+    name: &str,
+    picks: &[usize],
+    exposure_ms: Option<f64>,
+) -> (Measurer, Vec<([Frame; 2], Frame)>) {
+    let mut sim = Simulator::new(scenario).unwrap();
     let mut config = Config::embedded();
     config.mount = mount_config(sim.mount());
+    config.camera.exposure_ms = exposure_ms.unwrap_or(0.0);
     let measurer = Measurer::new(camera_model(&sim).unwrap(), &config.measure()).unwrap();
     let out = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("target/bench-frames")
-        .join(scenario);
+        .join(name);
     let _ = std::fs::create_dir_all(&out);
     let last = picks.iter().copied().max().unwrap_or(0) + 1;
     let mut frames = Vec::new();
@@ -108,5 +120,35 @@ fn bench(c: &mut Criterion) {
     }
 }
 
-criterion_group!(benches, bench);
+/// A tracked frame blurred 5-6 px across its rim (`severe_turbulence` with
+/// a 25 ms exposure, frame 415, a 60 px disc): with the exposure time known
+/// the pass starts at the window the track's motion predicts, without it
+/// the pass finds that window by widening. Both in the same run.
+fn bench_long_exposure(c: &mut Criterion) {
+    let mut scenario = Scenario::builtin("severe_turbulence").unwrap();
+    scenario.camera.exposure_ms = 25.0;
+    for (label, exposure_ms) in [("exposure known", Some(25.0)), ("exposure unknown", None)] {
+        let (mut measurer, triples) = frame_triples_of(
+            scenario.clone(),
+            "severe_turbulence_25ms",
+            &[414],
+            exposure_ms,
+        );
+        for (track, frame) in &triples {
+            for previous in track {
+                measurer.measure(previous);
+            }
+            let primed = measurer.clone();
+            let name = format!(
+                "measure tracked severe_turbulence_25ms/{} {label}",
+                frame.seq
+            );
+            c.bench_function(&name, |b| {
+                b.iter_custom(|iters| time_tracked(&primed, frame, iters, None));
+            });
+        }
+    }
+}
+
+criterion_group!(benches, bench, bench_long_exposure);
 criterion_main!(benches);

@@ -16,6 +16,7 @@ use crate::source::v4l::V4lConfig;
 use drogue_sim::bounds::{self, Range};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
+use std::time::Duration;
 use toml::Value;
 
 /// Largest whole number a TOML file can hold (its integers are i64).
@@ -28,6 +29,7 @@ pub const RANGES: &[(&str, Range)] = &[
     ("drogue.inner_radius_m", Range::above(0.0, 10.0)),
     ("drogue.canopy_radius_m", Range::above(0.0, 20.0)),
     ("drogue.canopy_band_m", Range::closed(0.0, 20.0)),
+    ("camera.exposure_ms", Range::closed(0.0, 1000.0)),
     ("mount.camera_position_body_m", Range::closed(-100.0, 100.0)),
     ("mount.camera_roll_deg", Range::closed(-360.0, 360.0)),
     ("mount.camera_pitch_deg", Range::closed(-360.0, 360.0)),
@@ -192,6 +194,18 @@ pub struct CameraConfig {
     /// Camera YAML; empty: the source's own camera (the simulator's), or
     /// `--camera` on the command line.
     pub file: PathBuf,
+    /// Exposure time, milliseconds; 0: not known (the source's own when it
+    /// knows it: the simulator's scenario, a V4L2 camera's fixed exposure).
+    pub exposure_ms: f64,
+}
+
+impl CameraConfig {
+    /// [`Self::exposure_ms`] as a time; `None` when not known.
+    pub fn exposure(&self) -> Option<Duration> {
+        (self.exposure_ms > 0.0)
+            .then(|| Duration::try_from_secs_f64(self.exposure_ms * 1e-3).ok())
+            .flatten()
+    }
 }
 
 /// `[run]`: the live pipeline's defaults.
@@ -398,6 +412,7 @@ impl Config {
             detect: self.detect.clone(),
             fit: self.fit.clone(),
             track: self.track.clone(),
+            exposure: self.camera.exposure(),
         }
     }
 

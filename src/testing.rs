@@ -245,6 +245,7 @@ pub fn frame_truth(
         canopy_radius: 0.33,
         visible_rim_frac: 1.0,
         coupled: false,
+        blur_px: [0.0, 0.0],
     }
 }
 

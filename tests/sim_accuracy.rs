@@ -157,3 +157,58 @@ fn default_fit_is_at_least_as_accurate_as_algorithm1_on_occluded_rims() {
     }
     assert!(ours.detected_of_detectable >= paper.detected_of_detectable);
 }
+
+/// The motion blur a track predicts (its rim's travel over the exposure,
+/// from the detections' frame-to-frame motion) against the blur the
+/// simulator drew each frame with. The severe-turbulence scenario with a
+/// 25 ms exposure (blurs of up to 9 px, 2.3 px at the median) and without
+/// the receiver's attitude wobble: the simulator's blur is the relative
+/// translation's only, while the image motion a track sees includes the
+/// camera's rotation. Predicting no blur would be off by the blur itself.
+#[test]
+fn the_blur_a_track_predicts_is_the_blur_drawn() {
+    let mut scenario = Scenario::builtin("severe_turbulence").expect("scenario");
+    scenario.camera.exposure_ms = 25.0;
+    scenario.receiver.wobble_deg = 0.0;
+    let exposure = drogue_vision::source::sim::scenario_exposure(&scenario).expect("blurred");
+    let mut sim = Simulator::new(scenario).expect("simulator");
+    let mut config = Config::embedded();
+    config.mount = mount_config(sim.mount());
+    config.camera.exposure_ms = exposure.as_secs_f64() * 1e3;
+    let mut measurer =
+        Measurer::new(camera_model(&sim).expect("camera"), &config.measure()).expect("measurer");
+    let (mut misses, mut drawn) = (Vec::new(), Vec::new());
+    for (image, truth) in sim.by_ref().take(450) {
+        let capture_time_ns = (truth.t * 1e9) as u64;
+        if let Some(sweep) = measurer.predicted_blur(capture_time_ns) {
+            let predicted = [sweep.end.cx - sweep.start.cx, sweep.end.cy - sweep.start.cy];
+            let [du, dv] = truth.blur_px;
+            misses.push((predicted[0] - du).hypot(predicted[1] - dv));
+            drawn.push(du.hypot(dv));
+        }
+        measurer.measure(&Frame {
+            seq: truth.seq,
+            capture_time_ns,
+            image,
+            origin: FrameOrigin::Sim,
+        });
+    }
+    assert!(misses.len() >= 400, "only {} predictions", misses.len());
+    let median = |v: &mut Vec<f64>| {
+        v.sort_by(f64::total_cmp);
+        v[v.len() / 2]
+    };
+    let (miss, length) = (median(&mut misses.clone()), median(&mut drawn));
+    let p90 = {
+        misses.sort_by(f64::total_cmp);
+        misses[misses.len() * 9 / 10]
+    };
+    eprintln!(
+        "predicted blur off by {miss:.2} px (median), {p90:.2} px (90th percentile); drawn {length:.2} px (median)"
+    );
+    assert!(length > 1.5, "too little blur to judge: {length} px");
+    assert!(
+        miss < 0.5 * length && p90 < 1.5 * length,
+        "{miss} / {p90} px off for {length} px"
+    );
+}

@@ -113,4 +113,10 @@ pub struct FrameTruth {
     pub visible_rim_frac: f64,
     /// The probe is in the drogue (contact made).
     pub coupled: bool,
+    /// The drogue's image motion during the exposure that the frame's
+    /// motion blur was drawn with (u, v pixels, in the distorted frame):
+    /// the relative translation's, not the camera's rotation. Zero without
+    /// motion blur; absent from truth written before it was recorded.
+    #[serde(default)]
+    pub blur_px: [f64; 2],
 }

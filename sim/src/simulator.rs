@@ -344,6 +344,7 @@ impl Simulator {
             canopy_radius: d.canopy_radius,
             visible_rim_frac: visible as f64 / n,
             coupled: st.coupled,
+            blur_px: scene.blur_px,
         }
     }
 }

@@ -62,18 +62,31 @@ fn output_err(path: &Path, e: impl std::fmt::Display) -> SimCommandError {
     }
 }
 
-/// The scenario's camera mount as a config fragment `--config` takes.
+/// The scenario's camera mount as a config fragment `--config` takes, and
+/// its exposure time when its frames are motion-blurred (from which a
+/// tracked frame's blur is predicted, as `run` does with `sim:`).
 fn mount_fragment(sim: &Simulator) -> Result<String, SimCommandError> {
     #[derive(serde::Serialize)]
+    struct Exposure {
+        exposure_ms: f64,
+    }
+    #[derive(serde::Serialize)]
     struct Fragment {
+        #[serde(skip_serializing_if = "Option::is_none")]
+        camera: Option<Exposure>,
         mount: crate::measure::mount::MountConfig,
     }
+    let exposure = crate::source::sim::scenario_exposure(sim.scenario());
     let body = toml::to_string(&Fragment {
+        camera: exposure.map(|e| Exposure {
+            exposure_ms: e.as_secs_f64() * 1e3,
+        }),
         mount: crate::source::sim::mount_config(sim.mount()),
     })
     .map_err(|e| SimCommandError::Setup(format!("the scenario's mount: {e}")))?;
     Ok(format!(
-        "# The camera mount of this simulated scenario (drogue-vision sim).\n\
+        "# The camera mount of this simulated scenario (drogue-vision sim), and its\n\
+         # exposure time when its frames are motion-blurred.\n\
          # Use it with the frames: process --camera camera.yaml --config mount.toml .\n{body}"
     ))
 }

@@ -132,6 +132,63 @@ impl Ellipse {
     pub fn distance_px(&self, u: f64, v: f64) -> f64 {
         self.to_conic().sampson_distance(u, v)
     }
+
+    /// Distance from `from` along the unit direction `dir` to where the ray
+    /// leaves the ellipse, pixels; `None` when `from` lies outside it.
+    pub fn exit_distance_px(&self, from: [f64; 2], dir: [f64; 2]) -> Option<f64> {
+        let (s, c) = self.theta.sin_cos();
+        let (dx, dy) = (from[0] - self.cx, from[1] - self.cy);
+        // In the axes' frame, scaled so that the ellipse is the unit circle:
+        // |p + t u| = 1, t in pixels along `dir`.
+        let p = [(c * dx + s * dy) / self.a, (c * dy - s * dx) / self.b];
+        let u = [
+            (c * dir[0] + s * dir[1]) / self.a,
+            (c * dir[1] - s * dir[0]) / self.b,
+        ];
+        let qa = u[0] * u[0] + u[1] * u[1];
+        let qb = p[0] * u[0] + p[1] * u[1];
+        let qc = p[0] * p[0] + p[1] * p[1] - 1.0;
+        if !(qc <= 0.0 && qa > 0.0 && qa.is_finite()) {
+            return None;
+        }
+        Some((-qb + (qb * qb - qa * qc).sqrt()) / qa)
+    }
+}
+
+/// A tracked rim's motion during one exposure (undistorted pixels): where
+/// it is predicted at the exposure's start and at its end. A motion blur
+/// smears each rim point from the one to the other.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ExposureSweep {
+    /// The rim at the start of the exposure.
+    pub start: Ellipse,
+    /// The rim at its end.
+    pub end: Ellipse,
+}
+
+impl ExposureSweep {
+    /// How far the rim moves during the exposure along the ray from `from`
+    /// in the unit direction `dir`, pixels: the length of the blur's ramp
+    /// that ray crosses. `None` when `from` lies outside either ellipse.
+    pub fn along_ray_px(&self, from: [f64; 2], dir: [f64; 2]) -> Option<f64> {
+        let start = self.start.exit_distance_px(from, dir)?;
+        let end = self.end.exit_distance_px(from, dir)?;
+        Some((end - start).abs())
+    }
+
+    /// At most how far the rim moves along a ray from the centre (to first
+    /// order in the motion): a shift of the centre by up to `a / b` times
+    /// its length (the normal is at most that oblique to such a ray), each
+    /// axis' change once, a turn by up to `a / b` times its arc at the
+    /// major axis' end.
+    pub fn most_travel_px(&self) -> f64 {
+        let (s, e) = (&self.start, &self.end);
+        let a = s.a.max(e.a);
+        let oblique = a / s.b.min(e.b);
+        let shift = (e.cx - s.cx).hypot(e.cy - s.cy);
+        let turn = a * e.theta_error_rad(s);
+        (shift + turn) * oblique + (e.a - s.a).abs() + (e.b - s.b).abs()
+    }
 }
 
 impl Conic {
@@ -267,6 +324,93 @@ mod tests {
         assert!(e.contains(e.cx, e.cy));
         assert!(!e.contains(f64::NAN, e.cy));
         assert!(!Ellipse::new(0.0, 0.0, f64::NAN, 1.0, 0.0).contains(0.0, 0.0));
+    }
+
+    #[test]
+    fn a_ray_leaves_the_ellipse_where_it_crosses_it() {
+        let e = Ellipse::new(100.0, 50.0, 40.0, 20.0, 0.7);
+        let (s, c) = e.theta.sin_cos();
+        // From the centre: the semi-axes along the axes.
+        let centre = [e.cx, e.cy];
+        assert!((e.exit_distance_px(centre, [c, s]).unwrap() - 40.0).abs() < 1e-9);
+        assert!((e.exit_distance_px(centre, [-s, c]).unwrap() - 20.0).abs() < 1e-9);
+        // From anywhere inside, the exit point is on the ellipse.
+        let from = [e.cx + 7.0, e.cy - 4.0];
+        for k in 0..16 {
+            let phi = k as f64 * std::f64::consts::TAU / 16.0;
+            let dir = [phi.cos(), phi.sin()];
+            let t = e.exit_distance_px(from, dir).unwrap();
+            let p = [from[0] + t * dir[0], from[1] + t * dir[1]];
+            assert!(
+                e.to_conic().sampson_distance(p[0], p[1]).abs() < 1e-9,
+                "{k}"
+            );
+        }
+        // From outside: no exit.
+        assert!(
+            e.exit_distance_px([e.cx + 50.0, e.cy + 50.0], [1.0, 0.0])
+                .is_none()
+        );
+        assert!(e.exit_distance_px([f64::NAN, 0.0], [1.0, 0.0]).is_none());
+    }
+
+    #[test]
+    fn an_exposure_sweep_is_the_rims_travel_along_each_ray() {
+        // A circle of radius 30 moving 8 px along +u during the exposure,
+        // seen from its centre at mid-exposure: the rim travels 8 px along
+        // the motion, nothing across it, and 8 |cos phi| to first order
+        // between.
+        let sweep = ExposureSweep {
+            start: Ellipse::new(96.0, 50.0, 30.0, 30.0, 0.0),
+            end: Ellipse::new(104.0, 50.0, 30.0, 30.0, 0.0),
+        };
+        let from = [100.0, 50.0];
+        let along = |phi: f64| sweep.along_ray_px(from, [phi.cos(), phi.sin()]).unwrap();
+        assert!((along(0.0) - 8.0).abs() < 1e-9);
+        assert!((along(std::f64::consts::PI) - 8.0).abs() < 1e-9);
+        assert!(along(std::f64::consts::FRAC_PI_2) < 1e-9);
+        let phi = 1.0f64;
+        assert!((along(phi) - 8.0 * phi.cos()).abs() < 0.1, "{}", along(phi));
+        // Growing as it nears: the rim moves out all round.
+        let nearing = ExposureSweep {
+            start: Ellipse::new(100.0, 50.0, 30.0, 30.0, 0.0),
+            end: Ellipse::new(100.0, 50.0, 31.0, 31.0, 0.0),
+        };
+        assert!((nearing.along_ray_px(from, [0.6, 0.8]).unwrap() - 1.0).abs() < 1e-9);
+        // The bound holds all round, for motions of every kind.
+        for k in 0..200 {
+            let x = k as f64;
+            let mid = Ellipse::new(300.0, 200.0, 20.0 + x % 37.0, 8.0 + x % 11.0, 0.1 * x);
+            let d = [
+                (0.37 * x).sin() * 3.0,
+                (0.53 * x).cos() * 3.0,
+                (0.71 * x).sin(),
+                (0.29 * x).cos() * 0.5,
+                (0.13 * x).sin() * 0.05,
+            ];
+            let at = |t: f64| {
+                Ellipse::new(
+                    mid.cx + t * d[0],
+                    mid.cy + t * d[1],
+                    mid.a + t * d[2],
+                    mid.b + t * d[3],
+                    mid.theta + t * d[4],
+                )
+            };
+            let sweep = ExposureSweep {
+                start: at(-0.5),
+                end: at(0.5),
+            };
+            let most = sweep.most_travel_px();
+            for j in 0..64 {
+                let phi = j as f64 * std::f64::consts::TAU / 64.0;
+                let along = sweep.along_ray_px([mid.cx, mid.cy], [phi.cos(), phi.sin()]);
+                assert!(
+                    along.unwrap() <= most * 1.05 + 1e-9,
+                    "{k} {j}: {along:?} > {most}"
+                );
+            }
+        }
     }
 
     #[test]

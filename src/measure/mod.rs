@@ -22,7 +22,7 @@ use ellipse::Ellipse;
 use miss::{MissReason, NotDetected};
 use nalgebra::Matrix3;
 use serde::{Deserialize, Serialize};
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 pub use pose::CirclePose;
 
@@ -107,6 +107,10 @@ pub struct MeasureConfig {
     pub fit: fit::FitConfig,
     /// Tracking and continuity (`[track]`).
     pub track: track::TrackConfig,
+    /// The camera's exposure time, when known (`[camera] exposure_ms`, or
+    /// the source's own): with it a tracked frame's motion blur is
+    /// predicted from the track's motion ([`track::Tracker::exposure_sweep`]).
+    pub exposure: Option<Duration>,
 }
 
 /// How the single-circle two-fold ambiguity was settled for a detection.
@@ -221,6 +225,7 @@ pub struct Measurer {
     fitter: fit::Fitter,
     mount: mount::Mount,
     tracker: track::Tracker,
+    exposure: Option<Duration>,
 }
 
 fn micros_since(t: Instant) -> u32 {
@@ -246,6 +251,7 @@ impl Measurer {
             drogue: d.clone(),
             camera,
             mount,
+            exposure: config.exposure,
         })
     }
 
@@ -265,6 +271,15 @@ impl Measurer {
         self.tracker.reset();
     }
 
+    /// The motion blur the track predicts for a frame captured at
+    /// `capture_time_ns`: the rim's travel during the exposure (undistorted
+    /// pixels). `None` without a known exposure time (`[camera]
+    /// exposure_ms` or the source's) or a fresh track with a velocity.
+    pub fn predicted_blur(&self, capture_time_ns: u64) -> Option<ellipse::ExposureSweep> {
+        self.exposure
+            .and_then(|e| self.tracker.exposure_sweep(capture_time_ns, e))
+    }
+
     /// Measures one frame. Never fails: a frame without a drogue gives a
     /// measurement without detection.
     pub fn measure(&mut self, frame: &Frame) -> Measurement {
@@ -272,9 +287,12 @@ impl Measurer {
         let mut times = StageTimes::default();
         let hint = self.tracker.search_hint(frame.capture_time_ns);
         let tracked = hint.is_some();
+        let sweep = self.predicted_blur(frame.capture_time_ns);
 
         let t = Instant::now();
-        let candidate = self.detector.detect_explained(&frame.image, hint.as_ref());
+        let candidate = self
+            .detector
+            .detect_moving(&frame.image, hint.as_ref(), sweep.as_ref());
         times.detect_us = micros_since(t);
         if let Err(miss) = &candidate {
             tracing::debug!(

@@ -1,6 +1,7 @@
 //! Temporal tracking: the ambiguity settled by the canopy rim or by
 //! continuity, a constant-velocity prediction of the ellipse for the ROI
-//! search, and track epochs (MAVLink `reset_counter`).
+//! search and of the rim's motion during the exposure (the motion blur
+//! the next frame should show), and track epochs (MAVLink `reset_counter`).
 //!
 //! A track lives while detections keep coming no more than `max_gap_ms`
 //! apart; a longer gap (or time running backwards, e.g. a replay jumping)
@@ -16,11 +17,12 @@
 //! drogues are not where the last one was.
 
 use super::Disambiguation;
-use super::ellipse::Ellipse;
+use super::ellipse::{Ellipse, ExposureSweep};
 use super::pose::{CirclePose, EllipseParams, ellipse_from_params, ellipse_params};
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 use std::collections::VecDeque;
+use std::time::Duration;
 
 /// `[track]` in the config.
 #[derive(Clone, Debug, Serialize, Deserialize)]
@@ -212,6 +214,27 @@ impl Tracker {
             None => track.ellipse,
         };
         ellipse_from_params(&predicted).or_else(|| ellipse_from_params(&track.ellipse))
+    }
+
+    /// Where the track predicts the rim at the start and at the end of an
+    /// exposure of `exposure` centred on `capture_time_ns` (constant
+    /// velocity, as [`Self::search_hint`]): the motion blur the frame
+    /// should show. `None` while the track is not fresh or has no velocity
+    /// yet (one detection).
+    pub fn exposure_sweep(
+        &self,
+        capture_time_ns: u64,
+        exposure: Duration,
+    ) -> Option<ExposureSweep> {
+        let track = self.fresh_track(capture_time_ns)?;
+        let velocity = track.velocity_per_s?;
+        let dt_s = (capture_time_ns - track.time_ns) as f64 * 1e-9;
+        let half_s = 0.5 * exposure.as_secs_f64();
+        let at = |t_s: f64| ellipse_from_params(&(track.ellipse + velocity * t_s));
+        Some(ExposureSweep {
+            start: at(dt_s - half_s)?,
+            end: at(dt_s + half_s)?,
+        })
     }
 
     /// Whether the track's last pose is close enough in time and space to
@@ -497,6 +520,30 @@ mod tests {
             &ellipse(1.0),
         );
         assert_eq!(c.track_epoch, 1);
+    }
+
+    #[test]
+    fn the_exposure_sweep_is_the_track_at_the_exposures_ends() {
+        let mut t = Tracker::new(&config()).unwrap();
+        let exposure = Duration::from_millis(20);
+        t.choose([pose(0.3), pose(-0.3)], [None, None], 0, &ellipse(100.0));
+        // One detection: no velocity, no predicted blur.
+        assert!(t.exposure_sweep(40 * MS, exposure).is_none());
+        t.choose(
+            [pose(0.3), pose(-0.3)],
+            [None, None],
+            40 * MS,
+            &Ellipse::new(110.0, 196.0, 52.0, 31.0, 0.2),
+        );
+        // 250 px/s right, 100 px/s up, the axes growing 50 and 25 px/s: a
+        // frame at 80 ms is exposed from 70 to 90 ms.
+        let s = t.exposure_sweep(80 * MS, exposure).unwrap();
+        let start = Ellipse::new(117.5, 193.0, 53.5, 31.75, 0.2);
+        let end = Ellipse::new(122.5, 191.0, 54.5, 32.25, 0.2);
+        assert!(s.start.max_param_error_px(&start) < 1e-9, "{s:?}");
+        assert!(s.end.max_param_error_px(&end) < 1e-9, "{s:?}");
+        // A stale track predicts nothing.
+        assert!(t.exposure_sweep(40 * MS + 501 * MS, exposure).is_none());
     }
 
     #[test]

@@ -234,6 +234,9 @@ pub fn run(
     if let Some(m) = frames_in.source().mount() {
         config.mount = m;
     }
+    if let Some(e) = frames_in.source().exposure() {
+        config.camera.exposure_ms = e.as_secs_f64() * 1e3;
+    }
     let mount = Mount::from_config(&config.mount).map_err(setup)?;
     let measurer =
         Measurer::new(camera.clone(), &config.measure()).map_err(|e| setup(e.to_string()))?;

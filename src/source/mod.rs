@@ -11,6 +11,7 @@ use crate::camera::CameraModel;
 use crate::frame::Frame;
 use crate::measure::mount::MountConfig;
 use std::path::PathBuf;
+use std::time::Duration;
 
 /// A source address as given on the command line or in `[run] source`.
 #[derive(Clone, Debug, PartialEq)]
@@ -94,6 +95,12 @@ pub trait FrameSource: Send {
     fn mount(&self) -> Option<MountConfig>;
     /// Nominal frame rate, when known (for pacing and staleness).
     fn fps(&self) -> Option<f64>;
+    /// The exposure time, when the source knows it (the simulator's
+    /// scenario, a camera in manual exposure): it overrides `[camera]
+    /// exposure_ms`, from which a tracked frame's motion blur is predicted.
+    fn exposure(&self) -> Option<Duration> {
+        None
+    }
     /// Whether the frames' capture times form a timeline to replay at its
     /// own pace (the simulator, a log); a folder of images has none.
     fn recorded_timeline(&self) -> bool {

@@ -9,6 +9,7 @@ use drogue_sim::trajectory::World;
 use drogue_sim::{MountSpec, NED_FRAME_AUTOPILOT, Scenario, Simulator};
 use nalgebra::{Rotation3, UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
+use std::time::Duration;
 
 /// The simulator's camera mount in the config's terms (both use the mount
 /// convention of ARCHITECTURE.md section 3).
@@ -20,6 +21,15 @@ pub fn mount_config(spec: &MountSpec) -> MountConfig {
         camera_yaw_deg: spec.yaw_deg,
         probe_tip_body_m: spec.probe_tip_body_m,
     }
+}
+
+/// The exposure time over which a scenario's frames are blurred; `None`
+/// when they are not (no motion blur, or no exposure time).
+pub fn scenario_exposure(scenario: &Scenario) -> Option<Duration> {
+    let ms = scenario.camera.exposure_ms;
+    (scenario.scene.motion_blur && ms > 0.0)
+        .then(|| Duration::try_from_secs_f64(ms * 1e-3).ok())
+        .flatten()
 }
 
 /// The simulator's camera as the pipeline reads it (through its YAML, as any
@@ -262,6 +272,9 @@ impl FrameSource for SimSource {
     }
     fn fps(&self) -> Option<f64> {
         Some(self.sim.fps())
+    }
+    fn exposure(&self) -> Option<Duration> {
+        scenario_exposure(self.sim.scenario())
     }
     fn recorded_timeline(&self) -> bool {
         true

@@ -32,7 +32,7 @@ const MIN_SHARP_SHARE: f64 = 0.05;
 /// `paper10`, `tilt`, `range` and `noise` sets. Without it the share of a
 /// blurred rim's steps counted sharp fell to nothing at a blur of twice
 /// the 4 px floor (a 16 px minor radius blurred 7 px: 1 of 71 steps).
-const SHARP_STEP_OWN_PX: f64 = 2.6;
+pub(super) const SHARP_STEP_OWN_PX: f64 = 2.6;
 
 /// Share of the inside that must be dark when the canopy cannot be judged
 /// (`min_fill` applies otherwise): a disc is dark all over, up to a glare
@@ -274,6 +274,7 @@ impl Detector {
             inliers,
             step_widths_px,
             clipped_share,
+            widened: _,
             rim_contrast,
             shape,
             fill,

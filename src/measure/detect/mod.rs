@@ -35,7 +35,7 @@ mod shading;
 mod tests;
 mod verify;
 
-use super::ellipse::Ellipse;
+use super::ellipse::{Ellipse, ExposureSweep};
 use super::miss::{MissReason, NotDetected};
 use super::stats::median;
 use crate::camera::CameraModel;
@@ -469,6 +469,18 @@ impl Detector {
         image: &GrayImage,
         hint: Option<&Ellipse>,
     ) -> Result<RimCandidate, NotDetected> {
+        self.detect_moving(image, hint, None)
+    }
+
+    /// [`Self::detect_explained`], with the rim's motion during the
+    /// exposure that the track predicts (`sweep`, undistorted pixels): the
+    /// tracked pass then starts with the window that motion's blur needs.
+    pub fn detect_moving(
+        &mut self,
+        image: &GrayImage,
+        hint: Option<&Ellipse>,
+        sweep: Option<&ExposureSweep>,
+    ) -> Result<RimCandidate, NotDetected> {
         self.misses = Misses::default();
         let miss = |misses: &Misses| NotDetected {
             reason: misses.reason(),
@@ -483,7 +495,7 @@ impl Detector {
             } else {
                 self.noise_age += 1;
             }
-            match self.verify_tracked(image, h) {
+            match self.verify_tracked(image, h, sweep) {
                 Ok(v) => return Ok(v.into_candidate()),
                 Err(why) => tracing::debug!(?why, "not at the tracked ellipse: full search"),
             }
@@ -586,6 +598,7 @@ impl Detector {
             spacing_px,
             max_points,
             RimUse::Measure,
+            1.0,
         ) {
             Ok(pass) => {
                 let measured = evidence::MeasuredRim::near(

@@ -8,6 +8,7 @@ use image::Luma;
 use nalgebra::Matrix3;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
+use verify::{MAX_WIDEN, WIDEN_STEP};
 
 fn camera(w: u32, h: u32) -> CameraModel {
     let k = Matrix3::new(
@@ -1402,9 +1403,9 @@ fn a_tracked_pass_from_a_prediction_a_pixel_off_measures_the_same_rim() {
     let truth = Ellipse::new(201.3, 152.6, 40.0, 34.0, 0.3);
     let img = Scene::new(truth).render(w, h, 2.0, 11);
     let mut det = detector(&cam);
-    let exact = det.verify_tracked(&img, &truth).expect("verified");
+    let exact = det.verify_tracked(&img, &truth, None).expect("verified");
     let off = Ellipse::new(202.2, 151.7, 40.9, 34.9, 0.3);
-    let moved = det.verify_tracked(&img, &off).expect("verified");
+    let moved = det.verify_tracked(&img, &off, None).expect("verified");
     let fitted = |v: &super::Verified| conic_fit::fit_ellipse(&v.points_px).unwrap();
     let (from_exact, from_off) = (fitted(&exact), fitted(&moved));
     assert_near(&from_exact, &truth, 0.05, 0.05);
@@ -1413,4 +1414,64 @@ fn a_tracked_pass_from_a_prediction_a_pixel_off_measures_the_same_rim() {
         from_off.max_param_error_px(&from_exact) < 0.02,
         "{from_off:?} against {from_exact:?}"
     );
+}
+
+/// The rim's travel over an exposure in which `truth` moves by `blur`
+/// (pixels), centred on it.
+fn swept(truth: &Ellipse, blur: [f64; 2]) -> ExposureSweep {
+    let at = |k: f64| Ellipse {
+        cx: truth.cx + k * blur[0],
+        cy: truth.cy + k * blur[1],
+        ..*truth
+    };
+    ExposureSweep {
+        start: at(-0.5),
+        end: at(0.5),
+    }
+}
+
+#[test]
+fn the_window_a_tracked_motion_predicts_is_the_one_the_pass_widens_to() {
+    // Discs drawn with linear motion blur (the blur is the motion: the
+    // truth), from none to more than the disc's radius: the window the
+    // motion predicts is the one the narrow pass settles on by widening,
+    // and the pass that starts there measures the same rim.
+    let (w, h) = (400, 300);
+    let cam = camera(w, h);
+    let truth = Ellipse::new(198.3, 151.7, 45.0, 42.0, 0.3);
+    let sharp = Scene::new(truth).render(w, h, 0.0, 13);
+    let mut widths = Vec::new();
+    for (length, angle_deg) in [
+        (0.0, 0.0),
+        (4.0, 10.0),
+        (6.0, 70.0),
+        (8.0, 10.0),
+        (14.0, 70.0),
+        (18.0, 10.0),
+        (24.0, 30.0),
+        (40.0, 120.0),
+    ] {
+        let (s, c) = f64::to_radians(angle_deg).sin_cos();
+        let blur = [length * c, length * s];
+        let img = if length > 0.0 {
+            add_noise(&motion_blur(&sharp, blur[0], blur[1], 64), 2.0, 5)
+        } else {
+            add_noise(&sharp, 2.0, 5)
+        };
+        let mut det = detector(&cam);
+        let found = det
+            .rim_pass(&img, &truth, 1.0, 400, RimUse::Measure, 1.0)
+            .expect("the pass from 1");
+        let predicted = det.widen_for_motion(&truth, &swept(&truth, blur));
+        assert_eq!(predicted, found.widened, "{length} px at {angle_deg} deg");
+        let started = det
+            .rim_pass(&img, &truth, 1.0, 400, RimUse::Measure, predicted)
+            .expect("the pass from the prediction");
+        assert_eq!(started.points_px, found.points_px, "{length} px");
+        widths.push(predicted);
+    }
+    // The blurs span every window: none widened, once, and to the widest.
+    assert_eq!(widths.first(), Some(&1.0));
+    assert!(widths.contains(&WIDEN_STEP), "{widths:?}");
+    assert_eq!(widths.last(), Some(&MAX_WIDEN));
 }

@@ -2,6 +2,7 @@
 //! fit, and the narrow pass around it (repeated until it settles), with the
 //! checks of the rim itself (size, shape, contrast, one dark inside).
 
+use super::evidence::SHARP_STEP_OWN_PX;
 use super::glare::{GlareCover, glare_before_step, glare_on_light_side};
 use super::search::Seed;
 use super::shading::ShadedEdge;
@@ -9,7 +10,7 @@ use super::{
     Detector, Reject, VEIL_MIN_GRAY, VEIL_SIGMAS, Verified, conic_fit, median, polar_radius,
     polar_radius_local, ray_directions, rim, smoothing_half_for_contrast, smoothing_half_for_ramp,
 };
-use crate::measure::ellipse::Ellipse;
+use crate::measure::ellipse::{Ellipse, ExposureSweep};
 use image::GrayImage;
 use std::f64::consts::TAU;
 
@@ -31,8 +32,8 @@ pub(super) const VERIFY_SPACING_PX: f64 = 2.0;
 /// [`MAX_WIDEN`] times, and at most to [`MAX_WIDE_MARGIN_RADII`] of the
 /// radius and [`MAX_WIDE_MARGIN_PX`] pixels each way (32 px of motion blur
 /// is a 32 px ramp).
-const WIDEN_STEP: f64 = 2.5;
-const MAX_WIDEN: f64 = 6.25;
+pub(super) const WIDEN_STEP: f64 = 2.5;
+pub(super) const MAX_WIDEN: f64 = 6.25;
 pub(super) const CLIPPED_SHARE: f64 = 0.25;
 const MAX_WIDE_MARGIN_RADII: f64 = 0.6;
 const MAX_WIDE_MARGIN_PX: f64 = 48.0;
@@ -74,6 +75,10 @@ const SETTLED_MOVE_PX: f64 = 0.5;
 /// drogue moves more than half a pixel between frames; repeating its pass
 /// for that was about 8 % of a near tracked frame's instructions.
 const SETTLED_WINDOW_SHARE: f64 = 0.25;
+/// Rays round the rim on which a tracked motion's blur is predicted
+/// ([`Detector::widen_for_motion`]): a share to within a few percent.
+const MOTION_RAYS: usize = 64;
+
 /// Samples per seed radius on the rays of a seed's wide first pass.
 const WIDE_STEPS_PER_RADIUS: f64 = 40.0;
 /// A light bar over the disc ends within this share of the gap between
@@ -100,6 +105,9 @@ pub(super) struct RimPass {
     /// Share of the edges whose step still runs into its window's ends
     /// after the widest window: a blur longer than can be measured.
     pub(super) clipped_share: f64,
+    /// How much the pass widened its window for blur ([`WIDEN_STEP`] at a
+    /// time from its first, 1 or a tracked motion's): the one kept.
+    pub(super) widened: f64,
     pub(super) rim_contrast: f64,
     /// Share of the rays in the image with their edge on the ellipse.
     pub(super) shape: f64,
@@ -408,6 +416,7 @@ impl Detector {
             self.scout_spacing_px(),
             self.cfg.max_rim_points,
             RimUse::Scout,
+            1.0,
             SETTLED_MOVE_PX,
         )?;
         // A seed that settles on a candidate's rim is that candidate: its
@@ -488,6 +497,7 @@ impl Detector {
             spacing_px,
             max_points,
             rim_use,
+            1.0,
             SETTLED_MOVE_PX,
         )?;
         self.score(image, pass)
@@ -496,21 +506,72 @@ impl Detector {
     /// [`Self::verify_settled`] at a tracked frame's predicted ellipse,
     /// which verifies and measures in one pass: settled once it moves by a
     /// quarter of its narrowest window or less ([`SETTLED_WINDOW_SHARE`]).
+    ///
+    /// Where the track's motion during the exposure (`sweep`) smears the
+    /// rim, the pass starts with the window that motion needs
+    /// ([`Self::widen_for_motion`]), instead of finding it by widening.
     pub(super) fn verify_tracked(
         &mut self,
         image: &GrayImage,
         predicted: &Ellipse,
+        sweep: Option<&ExposureSweep>,
     ) -> Result<Verified, Reject> {
         let narrowest_window = self.narrow_window_px(predicted.b);
+        let first_widen = sweep.map_or(1.0, |s| self.widen_for_motion(predicted, s));
         let pass = self.settled_pass(
             image,
             predicted,
             self.cfg.tracked_rim_point_spacing_px,
             self.cfg.tracked_max_rim_points,
             RimUse::Measure,
+            first_widen,
             (SETTLED_WINDOW_SHARE * narrowest_window).max(SETTLED_MOVE_PX),
         )?;
+        tracing::trace!(
+            predicted = first_widen,
+            kept = pass.widened,
+            "tracked pass widened for blur"
+        );
         self.score(image, pass)
+    }
+
+    /// The widening ([`WIDEN_STEP`] at a time, up to [`MAX_WIDEN`]) a
+    /// narrow pass about `start` needs for the motion blur that `sweep`
+    /// predicts: the least at which no more than [`CLIPPED_SHARE`] of the
+    /// rays' steps run into their window's ends, which is where the pass
+    /// itself stops widening. A step is as wide as a sharp step's own width
+    /// plus the rim's travel along its ray (the width the pass measures:
+    /// twice its crossing's distance to its light end), and runs into its
+    /// window when half that width reaches the window's margin.
+    pub(super) fn widen_for_motion(&self, start: &Ellipse, sweep: &ExposureSweep) -> f64 {
+        // Most tracked frames: no step could reach even the narrowest
+        // window's ends (the smallest radius has it).
+        // (A motion that is not a number widens nothing.)
+        let widest_ramp = sweep.most_travel_px() + SHARP_STEP_OWN_PX;
+        let may_reach = 0.5 * widest_ramp >= self.window_margin_px(start.b, 1.0);
+        if !may_reach {
+            return 1.0;
+        }
+        let centre = [start.cx, start.cy];
+        let ramps: Vec<(f64, f64)> = ray_directions(MOTION_RAYS)
+            .filter_map(|dir| {
+                let radius = start.exit_distance_px(centre, dir)?;
+                let ramp = sweep.along_ray_px(centre, dir)? + SHARP_STEP_OWN_PX;
+                Some((radius, ramp))
+            })
+            .collect();
+        let mut widen = 1.0;
+        while widen < MAX_WIDEN {
+            let clipped = ramps
+                .iter()
+                .filter(|&&(radius, ramp)| 0.5 * ramp >= self.window_margin_px(radius, widen))
+                .count();
+            if clipped as f64 <= CLIPPED_SHARE * ramps.len() as f64 {
+                break;
+            }
+            widen *= WIDEN_STEP;
+        }
+        widen
     }
 
     /// Rim ray spacing on which candidates are compared, pixels.
@@ -539,6 +600,7 @@ impl Detector {
     /// ellipse: a start a few pixels off gives edges near the window's
     /// ends), at most three times. The evidence (the canopy's rim, a second
     /// ray pass) is looked at only on the pass that is kept.
+    #[allow(clippy::too_many_arguments)]
     fn settled_pass(
         &mut self,
         image: &GrayImage,
@@ -546,11 +608,19 @@ impl Detector {
         spacing_px: f64,
         max_points: u32,
         rim_use: RimUse,
+        first_widen: f64,
         settled_px: f64,
     ) -> Result<RimPass, Reject> {
         let mut previous = *start;
         for round in 0..3 {
-            let pass = self.rim_pass(image, &previous, spacing_px, max_points, rim_use)?;
+            let pass = self.rim_pass(
+                image,
+                &previous,
+                spacing_px,
+                max_points,
+                rim_use,
+                first_widen,
+            )?;
             if round == 2 || pass.ellipse.max_param_error_px(&previous) <= settled_px {
                 return Ok(pass);
             }
@@ -672,6 +742,7 @@ impl Detector {
         spacing_px: f64,
         max_points: u32,
         rim_use: RimUse,
+        first_widen: f64,
     ) -> Result<RimPass, Reject> {
         self.rim_pass_at(
             image,
@@ -680,7 +751,24 @@ impl Detector {
             max_points,
             rim_use,
             GlareCover::Part,
+            first_widen,
         )
+    }
+
+    /// Half-width of a narrow pass's window on a ray to a rim `radius_px`
+    /// away, widened by `widen` for blur (pixels): never narrower than the
+    /// unwidened window, nor wider than [`MAX_WIDE_MARGIN_RADII`] of the
+    /// radius or [`MAX_WIDE_MARGIN_PX`].
+    fn window_margin_px(&self, radius_px: f64, widen: f64) -> f64 {
+        let base = self.narrow_window_px(radius_px);
+        if widen > 1.0 {
+            (base * widen)
+                .min(MAX_WIDE_MARGIN_RADII * radius_px)
+                .min(MAX_WIDE_MARGIN_PX)
+                .max(base)
+        } else {
+            base
+        }
     }
 
     /// Half-width of a narrow pass's window on a ray to a rim `radius_px`
@@ -720,15 +808,7 @@ impl Detector {
                 dir[1] * cos_theta - dir[0] * sin_theta,
             );
             let r = polar_radius_local(start.a, start.b, cos_local, sin_local);
-            let base = self.narrow_window_px(r);
-            let margin = if widen > 1.0 {
-                (base * widen)
-                    .min(MAX_WIDE_MARGIN_RADII * r)
-                    .min(MAX_WIDE_MARGIN_PX)
-                    .max(base)
-            } else {
-                base
-            };
+            let margin = self.window_margin_px(r, widen);
             let (s0, s1) = ((r - margin).max(0.5), r + margin);
             let far = [centre[0] + s1 * dir[0], centre[1] + s1 * dir[1]];
             let near = [centre[0] + s0 * dir[0], centre[1] + s0 * dir[1]];
@@ -932,6 +1012,7 @@ impl Detector {
 
     /// [`Self::rim_pass`]; `cover` says whether a glare hides most of the
     /// rim, so that the pass looks again, closer, at what it leaves.
+    #[allow(clippy::too_many_arguments)]
     fn rim_pass_at(
         &mut self,
         image: &GrayImage,
@@ -940,6 +1021,7 @@ impl Detector {
         max_points: u32,
         rim_use: RimUse,
         cover: GlareCover,
+        first_widen: f64,
     ) -> Result<RimPass, Reject> {
         let centre = self.camera.distort_px([start.cx, start.cy]);
         let perimeter = TAU * ((start.a * start.a + start.b * start.b) / 2.0).sqrt();
@@ -949,8 +1031,9 @@ impl Detector {
         // A blurred rim is a ramp as wide as the blur: where most steps run
         // into the window's ends, their levels are not the disc's and the
         // canopy's, and the window is widened (the mid-level crossing of a
-        // whole blurred step is the edge).
-        let mut widen = 1.0;
+        // whole blurred step is the edge). A tracked pass may start wider,
+        // for the blur its motion predicts.
+        let mut widen = first_widen;
         let RayRound {
             mut steps,
             mut rays_in_image,
@@ -962,6 +1045,7 @@ impl Detector {
             }
             widen *= WIDEN_STEP;
         };
+        let widened = widen;
         let GlareDrop {
             glare_steps,
             glares_dropped,
@@ -978,7 +1062,15 @@ impl Detector {
         let closer = 0.5 * spacing_px;
         let closer_or = |this: &mut Self, short: Reject| {
             if glares_dropped && closer >= this.cfg.rim_point_spacing_px {
-                this.rim_pass_at(image, start, closer, max_points, rim_use, GlareCover::Most)
+                this.rim_pass_at(
+                    image,
+                    start,
+                    closer,
+                    max_points,
+                    rim_use,
+                    GlareCover::Most,
+                    first_widen,
+                )
             } else {
                 Err(short)
             }
@@ -1054,6 +1146,7 @@ impl Detector {
             inliers,
             step_widths_px: widths_px,
             clipped_share,
+            widened,
             rim_contrast,
             shape,
             fill,

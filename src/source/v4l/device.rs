@@ -58,6 +58,9 @@ struct Granted {
     layout: BufferLayout,
     fps: Option<f64>,
     exposure: String,
+    /// The fixed exposure time, when the camera is in manual exposure and
+    /// reads it back.
+    exposure_time: Option<Duration>,
     gain: String,
     card: String,
     driver: String,
@@ -131,6 +134,9 @@ impl Camera for OpenCamera {
     fn fps(&self) -> Option<f64> {
         self.granted.fps
     }
+    fn exposure(&self) -> Option<Duration> {
+        self.granted.exposure_time
+    }
 }
 
 /// Opens `path` with the `[v4l]` settings, as often as the camera is lost.
@@ -173,7 +179,7 @@ fn open_camera(path: &str, config: &V4lConfig) -> Result<OpenCamera, String> {
         }
         let layout = negotiate_format(&device, config)?;
         let fps = negotiate_rate(&device, config.fps);
-        let exposure = set_exposure(&device, config.exposure);
+        let (exposure, exposure_time) = set_exposure(&device, config.exposure);
         let gain = set_gain(&device, config.gain);
         let mut stream = Stream::with_buffers(&device, Type::VideoCapture, config.buffers)
             .map_err(|e| format!("buffers: {e}"))?;
@@ -185,6 +191,7 @@ fn open_camera(path: &str, config: &V4lConfig) -> Result<OpenCamera, String> {
                 layout,
                 fps,
                 exposure,
+                exposure_time,
                 gain,
                 card: caps.card,
                 driver: caps.driver,
@@ -295,8 +302,9 @@ fn set_control(device: &Device, id: u32, value: i64) -> Result<(), String> {
         .map_err(|e| e.to_string())
 }
 
-/// Applies the exposure setting; returns what the camera now has, for the log.
-fn set_exposure(device: &Device, setting: ControlSetting) -> String {
+/// Applies the exposure setting; returns what the camera now has, for the
+/// log, and its exposure time when that is fixed (manual mode, read back).
+fn set_exposure(device: &Device, setting: ControlSetting) -> (String, Option<Duration>) {
     let result = match setting {
         ControlSetting::Driver => Ok(()),
         // Full auto where offered; UVC cameras mostly offer only aperture
@@ -309,15 +317,23 @@ fn set_exposure(device: &Device, setting: ControlSetting) -> String {
     if let Err(e) = result {
         tracing::warn!("camera exposure {setting:?} not set ({e}): left as the driver has it");
     }
-    let mode = match read_control(device, CID_EXPOSURE_AUTO) {
+    let manual = read_control(device, CID_EXPOSURE_AUTO);
+    let mode = match manual {
         Some(EXPOSURE_MANUAL) => "manual",
         Some(_) => "auto",
         None => "mode unknown",
     };
-    match read_control(device, CID_EXPOSURE_ABSOLUTE) {
+    let absolute = read_control(device, CID_EXPOSURE_ABSOLUTE);
+    // The control's unit is 100 us.
+    let fixed = absolute
+        .filter(|&v| manual == Some(EXPOSURE_MANUAL) && v > 0)
+        .and_then(|v| u64::try_from(v).ok())
+        .map(|v| Duration::from_micros(v.saturating_mul(100)));
+    let text = match absolute {
         Some(v) => format!("{mode}, {v} x 100 us"),
         None => format!("{mode} (no absolute exposure control)"),
-    }
+    };
+    (text, fixed)
 }
 
 /// Applies the gain setting where the camera offers one.

@@ -45,6 +45,10 @@ pub trait Camera: Send {
     fn description(&self) -> String;
     /// The granted frame rate, when the driver says.
     fn fps(&self) -> Option<f64>;
+    /// The exposure time, when the camera's is fixed (manual exposure).
+    fn exposure(&self) -> Option<Duration> {
+        None
+    }
 }
 
 /// Opens the camera (again).
@@ -212,6 +216,9 @@ impl<O: CameraOpener> FrameSource for LiveSource<O> {
     fn fps(&self) -> Option<f64> {
         self.fps
     }
+    fn exposure(&self) -> Option<Duration> {
+        self.camera.as_ref().and_then(Camera::exposure)
+    }
     fn live(&self) -> bool {
         true
     }
@@ -362,6 +369,10 @@ mod tests {
         fn fps(&self) -> Option<f64> {
             Some(30.0)
         }
+        fn exposure(&self) -> Option<Duration> {
+            // Manual exposure, 40 x 100 us.
+            Some(Duration::from_millis(4))
+        }
     }
 
     /// Opens fail while `failures` is above zero (each attempt takes one).
@@ -505,7 +516,11 @@ mod tests {
         for (e, ms) in waits.iter().zip([2, 4, 4]) {
             assert!(e.contains(&format!("next attempt in {ms} ms")), "{e}");
         }
+        // The open camera's exposure time is the source's; none while it
+        // is lost.
+        assert_eq!(s.exposure(), None);
         let back = s.next_frame().unwrap().unwrap().frame;
+        assert_eq!(s.exposure(), Some(Duration::from_millis(4)));
         assert_eq!(back.seq, 1, "sequence numbers never go back");
         assert_eq!(back.capture_time_ns, 1_700_000_009_000_000_000);
         assert_eq!(s.next_frame().unwrap().unwrap().frame.seq, 2);
