@@ -274,7 +274,8 @@ impl Measurer {
     /// The motion blur the track predicts for a frame captured at
     /// `capture_time_ns`: the rim's travel during the exposure (undistorted
     /// pixels). `None` without a known exposure time (`[camera]
-    /// exposure_ms` or the source's) or a fresh track with a velocity.
+    /// exposure_ms` or the source's), or without a fresh track that has a
+    /// velocity (two detections).
     pub fn predicted_blur(&self, capture_time_ns: u64) -> Option<ellipse::ExposureSweep> {
         self.exposure
             .and_then(|e| self.tracker.exposure_sweep(capture_time_ns, e))
