@@ -207,7 +207,9 @@ fn summary_schemas_and_channels(file: &mut File, len: u64) -> Vec<(u8, Vec<u8>)>
     if summary_start == 0 || summary_start >= end || end > footer_at {
         return Vec::new();
     }
-    if end - summary_start > SUMMARY_LIMIT_BYTES {
+    // What is read (the summary, its offsets, up to the footer) is bounded,
+    // whatever the footer claims.
+    if footer_at - summary_start > SUMMARY_LIMIT_BYTES {
         return Vec::new();
     }
     let Some(summary) = read_at(file, summary_start, footer_at - summary_start) else {

@@ -5,8 +5,8 @@
 use super::shading::shaded_points;
 use super::verify::{CLIPPED_SHARE, FillLevels, PoseEdges, RimPass};
 use super::{
-    Detector, Reject, SATURATED_GRAY, VEIL_MIN_GRAY, VEIL_SIGMAS, Verified, canopy, median,
-    polar_radius, rim,
+    Detector, Reject, SATURATED_GRAY, SHARP_STEP_OWN_PX, VEIL_MIN_GRAY, VEIL_SIGMAS, Verified,
+    canopy, median, polar_radius, rim,
 };
 use crate::camera::CameraModel;
 use crate::measure::ellipse::Ellipse;
@@ -25,14 +25,6 @@ use std::f64::consts::{PI, TAU};
 const SHARP_STEP_RADII: f64 = 0.2;
 const SHARP_STEP_PX: f64 = 4.0;
 const MIN_SHARP_SHARE: f64 = 0.05;
-/// The width a sharp rim step measures (the step's ends as the rim pass
-/// finds them, the smoothing's spread taken out): the median over sharp
-/// frames' steps is 2.6 px on the simulator (seed 15: baseline, haze,
-/// noise, throat shadow levels) and 2.65-2.75 px on the other renderer's
-/// `paper10`, `tilt`, `range` and `noise` sets. Without it the share of a
-/// blurred rim's steps counted sharp fell to nothing at a blur of twice
-/// the 4 px floor (a 16 px minor radius blurred 7 px: 1 of 71 steps).
-pub(super) const SHARP_STEP_OWN_PX: f64 = 2.6;
 
 /// Share of the inside that must be dark when the canopy cannot be judged
 /// (`min_fill` applies otherwise): a disc is dark all over, up to a glare

@@ -2,13 +2,13 @@
 //! fit, and the narrow pass around it (repeated until it settles), with the
 //! checks of the rim itself (size, shape, contrast, one dark inside).
 
-use super::evidence::SHARP_STEP_OWN_PX;
 use super::glare::{GlareCover, glare_before_step, glare_on_light_side};
 use super::search::Seed;
 use super::shading::ShadedEdge;
 use super::{
-    Detector, Reject, VEIL_MIN_GRAY, VEIL_SIGMAS, Verified, conic_fit, median, polar_radius,
-    polar_radius_local, ray_directions, rim, smoothing_half_for_contrast, smoothing_half_for_ramp,
+    Detector, Reject, SHARP_STEP_OWN_PX, VEIL_MIN_GRAY, VEIL_SIGMAS, Verified, conic_fit, median,
+    polar_radius, polar_radius_local, ray_directions, rim, smoothing_half_for_contrast,
+    smoothing_half_for_ramp,
 };
 use crate::measure::ellipse::{Ellipse, ExposureSweep};
 use image::GrayImage;
@@ -542,7 +542,9 @@ impl Detector {
     /// itself stops widening. A step is as wide as a sharp step's own width
     /// plus the rim's travel along its ray (the width the pass measures:
     /// twice its crossing's distance to its light end), and runs into its
-    /// window when half that width reaches the window's margin.
+    /// window when half that width reaches the window's margin. In
+    /// undistorted pixels about `start`'s centre, as the pass takes its
+    /// rays' radii (it casts them from the distorted centre).
     pub(super) fn widen_for_motion(&self, start: &Ellipse, sweep: &ExposureSweep) -> f64 {
         // Most tracked frames: no step could reach even the narrowest
         // window's ends (the smallest radius has it).
