@@ -2,7 +2,7 @@
 //! sharpness of its steps, the canopy's rim where its pose puts it, and the
 //! score that ranks the candidates.
 
-use super::shading::shaded_points;
+use super::shading::{beside_dark, better_without, shaded_points};
 use super::verify::{CLIPPED_SHARE, FillLevels, PoseEdges, RimPass};
 use super::{
     Detector, Reject, SATURATED_GRAY, SHARP_STEP_OWN_PX, VEIL_MIN_GRAY, VEIL_SIGMAS, Verified,
@@ -404,23 +404,47 @@ impl MeasuredRim {
         step_widths_px: Vec<f64>,
     ) -> Self {
         let keep = (0.05 * ellipse.a).max(3.0 * tol);
-        fn near<T>(items: impl IntoIterator<Item = T>, residuals: &[f64], keep: f64) -> Vec<T> {
+        let mut kept: Vec<bool> = residuals.iter().map(|r| *r <= keep).collect();
+        fn pick<T>(items: impl IntoIterator<Item = T>, kept: &[bool]) -> Vec<T> {
             items
                 .into_iter()
-                .zip(residuals)
-                .filter(|(_, r)| **r <= keep)
+                .zip(kept)
+                .filter(|(_, k)| **k)
                 .map(|(p, _)| p)
                 .collect()
         }
         let (points_px, undistorted) = match pose_edges {
             PoseEdges::Own(undistorted) => (
-                near(points_px.iter().copied(), residuals, keep),
-                near(undistorted, residuals, keep),
+                pick(points_px.iter().copied(), &kept),
+                pick(undistorted, &kept),
             ),
             PoseEdges::Shaded { base_px, shading } => {
+                // Only a sharp step has its two sides' slopes where they
+                // were measured: a blurred one's lie in the blur's tails.
+                let mut beside = beside_dark(&shading, BESIDE_DARK_SIGMAS);
+                for (b, w) in beside.iter_mut().zip(&step_widths_px) {
+                    *b &= *w <= SHARP_STEP_PX;
+                }
+                if beside.iter().zip(&kept).any(|(b, k)| *b && *k) {
+                    let undistorted: Vec<[f64; 2]> =
+                        base_px.iter().map(|&p| camera.undistort_px(p)).collect();
+                    let mut kept_residuals: Vec<f64> = residuals
+                        .iter()
+                        .zip(&kept)
+                        .zip(&beside)
+                        .filter(|((_, k), b)| **k && !**b)
+                        .map(|((r, _), _)| r.abs())
+                        .collect();
+                    let sigma_px = 1.4826 * median(&mut kept_residuals);
+                    if better_without(ellipse, &undistorted, &shading, &kept, &beside, sigma_px) {
+                        for (k, b) in kept.iter_mut().zip(&beside) {
+                            *k &= !b;
+                        }
+                    }
+                }
                 // The shading's slope is the whole pass's: moved first,
                 // then picked.
-                let moved = near(shaded_points(&base_px, &shading), residuals, keep);
+                let moved = pick(shaded_points(&base_px, &shading), &kept);
                 let undistorted = moved.iter().map(|&p| camera.undistort_px(p)).collect();
                 (moved, undistorted)
             }
@@ -428,10 +452,15 @@ impl MeasuredRim {
         Self {
             points_px,
             undistorted,
-            step_widths_px: near(step_widths_px, residuals, keep),
+            step_widths_px: pick(step_widths_px, &kept),
         }
     }
 }
+
+/// A measured edge whose light side falls further than this many of its
+/// noise's standard deviations below the canopy's slope has something dark
+/// just beyond it ([`beside_dark`]).
+const BESIDE_DARK_SIGMAS: f64 = 3.0;
 
 /// How much lighter the canopy's band is than the ring just outside a rim
 /// ([`Detector::rise_beyond`]), median over the rays; NaN where no ray

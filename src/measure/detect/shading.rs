@@ -1,9 +1,12 @@
-//! Where a measured rim point lies on a canopy shaded toward the disc: the
-//! step's mid level is taken between the disc's level and a light level a
-//! little beyond the step, which on a canopy brightening away from the disc
-//! is above the canopy's level at the edge itself.
+//! Where a measured rim point lies when the levels beside its step are not
+//! flat: the step's mid level is taken between the disc's level and a light
+//! level a little beyond the step, which on a canopy brightening away from
+//! the disc is above the canopy's level at the edge itself, and next to an
+//! occluder's outline just past the rim is below it.
 
 use super::{median, rim};
+use crate::measure::ellipse::Ellipse;
+use nalgebra::{Matrix5, Vector5};
 
 /// One ray's edge, for placing it on a shaded canopy.
 pub(super) struct ShadedEdge {
@@ -21,13 +24,29 @@ pub(super) struct ShadedEdge {
     /// The step's width as seen (blur and the profile's smoothing
     /// together), pixels.
     width_px: f64,
+    /// The dark side's slope before the step over the step's contrast, per
+    /// pixel (NaN where not measured).
+    relative_dark_slope: f64,
+    /// Standard deviation of `relative_slope` from the frame's noise alone,
+    /// per pixel.
+    relative_slope_sigma: f64,
 }
 
 impl ShadedEdge {
-    /// The edge `e` found on the ray in direction `dir`, with its light
-    /// side's slope ([`rim::light_side_slope`], gray levels per pixel).
-    pub(super) fn new(dir: [f64; 2], e: &rim::RayEdge, light_slope: f32) -> Self {
+    /// The edge `e` found on the ray in direction `dir`, with its light and
+    /// dark sides' slopes ([`rim::light_side_slope`],
+    /// [`rim::dark_side_slope`], gray levels per pixel) and the frame's
+    /// noise (gray levels).
+    pub(super) fn new(
+        dir: [f64; 2],
+        e: &rim::RayEdge,
+        [light_slope, dark_slope]: [f32; 2],
+        noise_gray: f64,
+    ) -> Self {
         Self {
+            relative_dark_slope: f64::from(dark_slope / (e.light - e.dark)),
+            relative_slope_sigma: noise_gray * rim::SLOPE_NOISE_PER_GRAY
+                / f64::from(e.light - e.dark),
             dir,
             // The light level is the mean of three samples from `light_s`:
             // its centre is a sample (0.5 px) further.
@@ -36,6 +55,29 @@ impl ShadedEdge {
             relative_slope: f64::from(light_slope / (e.light - e.dark)),
             contrast: f64::from(e.light - e.dark),
             width_px: 2.0 * (e.light_s - e.s),
+        }
+    }
+
+    /// How much faster the light side falls outward than the dark side
+    /// before the step, over the step's contrast, per pixel: a light added
+    /// over both sides (a glare's skirt, vignetting) slopes both alike and
+    /// leaves the mid level where it is; something dark just beyond the
+    /// step pulls only the light side down. The light side's alone where the
+    /// dark side was not measured.
+    fn own_fall(&self) -> f64 {
+        if self.relative_dark_slope.is_finite() {
+            self.relative_slope - self.relative_dark_slope
+        } else {
+            self.relative_slope
+        }
+    }
+
+    /// Standard deviation of [`ShadedEdge::own_fall`] from the noise alone.
+    fn own_fall_sigma(&self) -> f64 {
+        if self.relative_dark_slope.is_finite() {
+            std::f64::consts::SQRT_2 * self.relative_slope_sigma
+        } else {
+            self.relative_slope_sigma
         }
     }
 }
@@ -80,4 +122,225 @@ pub(super) fn shaded_points(points_px: &[[f64; 2]], edges: &[ShadedEdge]) -> Vec
             [p[0] + shift * e.dir[0], p[1] + shift * e.dir[1]]
         })
         .collect()
+}
+
+/// The canopy's slope beside the pass's steps, relative to their contrast:
+/// the median of their light sides' ([`shaded_points`]); `None` where none
+/// was measured.
+fn canopy_slope(edges: &[ShadedEdge]) -> Option<f64> {
+    let mut slopes: Vec<f64> = edges
+        .iter()
+        .map(|e| e.relative_slope)
+        .filter(|s| s.is_finite())
+        .collect();
+    (!slopes.is_empty()).then(|| median(&mut slopes))
+}
+
+/// The edges whose light side falls toward something dark just beyond the
+/// step, by more than the frame's noise allows (`sigmas` of it) below the
+/// canopy's slope (the pass's median): an occluder (the probe, the hose)
+/// or a strut lies there, so the light level was taken partly on it, the
+/// step's mid level is too low and its crossing too far in.
+pub(super) fn beside_dark(edges: &[ShadedEdge], sigmas: f64) -> Vec<bool> {
+    let Some(canopy) = canopy_slope(edges) else {
+        return vec![false; edges.len()];
+    };
+    // A canopy shaded toward the disc brightens outward: a step whose
+    // light side only stays level is no fall.
+    let m = canopy.min(0.0);
+    edges
+        .iter()
+        .map(|e| e.own_fall() < m - sigmas * e.own_fall_sigma())
+        .collect()
+}
+
+/// Each edge's crossing displacement (pixels along its ray, negative
+/// inward) from its own light side falling faster than the canopy's
+/// `relative_slope` (the pass's median, as [`shaded_points`] corrects
+/// for): the light level, taken a little beyond the step, is below the
+/// level at the edge, the mid level too low and the crossing too far in.
+/// The same first-order model as [`shaded_points`], at most half the
+/// distance to where the level was taken.
+fn own_fall_shift_px(e: &ShadedEdge, relative_slope: f64) -> f64 {
+    let excess = (e.own_fall() - relative_slope)
+        * e.contrast
+        * (0.5 * e.level_distance_px - 0.125 * e.width_px);
+    let limit = 0.5 * e.level_distance_px.max(0.0);
+    if e.ramp_slope > 0.0 && excess.is_finite() {
+        (excess / e.ramp_slope).clamp(-limit, limit)
+    } else {
+        0.0
+    }
+}
+
+/// Whether the fit of `points` (undistorted pixels, those with `kept` set)
+/// to `ellipse` is nearer the truth without the `beside` ones than with
+/// them: their displacements ([`own_fall_shift_px`]) move the least-squares
+/// ellipse by `g = N^-1 J^T s`, while leaving them out widens its scatter
+/// from `sigma_px^2 tr(N^-1)` to that of the points left (`N = J^T J`, `J`
+/// each point's distance derivatives). Both in the centre and the axes,
+/// pixels squared: left out only when that costs less than the
+/// displacement. A probe's outline a few pixels past the rim moves a
+/// handful of edges by tenths of a pixel and is left out; a glare streak's
+/// falling light over a third of the rim moves its edges by far less than
+/// the rest of the rim could place the ellipse without them.
+pub(super) fn better_without(
+    ellipse: &Ellipse,
+    points: &[[f64; 2]],
+    edges: &[ShadedEdge],
+    kept: &[bool],
+    beside: &[bool],
+    sigma_px: f64,
+) -> bool {
+    let Some(canopy) = canopy_slope(edges) else {
+        return false;
+    };
+    if !(sigma_px.is_finite() && sigma_px > 0.0) {
+        return false;
+    }
+    let (sin, cos) = ellipse.theta.sin_cos();
+    let mut all = Matrix5::<f64>::zeros();
+    let mut left = Matrix5::<f64>::zeros();
+    let mut pull = Vector5::<f64>::zeros();
+    for (i, p) in points.iter().enumerate() {
+        if !kept[i] {
+            continue;
+        }
+        let Some((j, normal)) = distance_derivatives(ellipse, sin, cos, *p) else {
+            continue;
+        };
+        let jjt = j * j.transpose();
+        all += jjt;
+        if beside[i] {
+            let e = &edges[i];
+            let along_normal = e.dir[0] * normal[0] + e.dir[1] * normal[1];
+            pull += j * (own_fall_shift_px(e, canopy) * along_normal);
+        } else {
+            left += jjt;
+        }
+    }
+    let (Some(all_inv), Some(left_inv)) = (all.try_inverse(), left.try_inverse()) else {
+        return false;
+    };
+    let centre_and_axes = |v: &Vector5<f64>| v.rows(0, 4).norm_squared();
+    let trace4 = |m: &Matrix5<f64>| (0..4).map(|k| m[(k, k)]).sum::<f64>();
+    let shift = all_inv * pull;
+    let with = centre_and_axes(&shift) + sigma_px * sigma_px * trace4(&all_inv);
+    let without = sigma_px * sigma_px * trace4(&left_inv);
+    without < with
+}
+
+/// The derivatives of a point's signed distance to the ellipse (outward
+/// positive) by its centre, semi-axes and angle, to first order (the point
+/// taken to the curve along the ray from the centre), and the outward
+/// normal there (image axes); `None` at the centre.
+fn distance_derivatives(
+    e: &Ellipse,
+    sin: f64,
+    cos: f64,
+    p: [f64; 2],
+) -> Option<(Vector5<f64>, [f64; 2])> {
+    let (dx, dy) = (p[0] - e.cx, p[1] - e.cy);
+    let (x, y) = (cos * dx + sin * dy, -sin * dx + cos * dy);
+    let (ct, st) = (x / e.a, y / e.b);
+    let r = ct.hypot(st);
+    if r.is_nan() || r <= 0.0 {
+        return None;
+    }
+    let (ct, st) = (ct / r, st / r);
+    let (nx, ny) = (ct / e.a, st / e.b);
+    let n = nx.hypot(ny);
+    let (nx, ny) = (nx / n, ny / n);
+    let (fx, fy) = (e.a * ct, e.b * st);
+    let normal = [cos * nx - sin * ny, sin * nx + cos * ny];
+    let j = Vector5::new(
+        -normal[0],
+        -normal[1],
+        -nx * ct,
+        -ny * st,
+        nx * fy - ny * fx,
+    );
+    Some((j, normal))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// An edge on the ray in direction `dir` at `s` px, 100 gray levels
+    /// from dark to light over a 3 px ramp, with these two sides' slopes
+    /// (gray levels per pixel outward) and noise of 2 gray levels.
+    fn edge(dir: [f64; 2], s: f64, light_slope: f32, dark_slope: f32) -> ShadedEdge {
+        let e = rim::RayEdge {
+            s,
+            dark: 30.0,
+            light: 130.0,
+            light_s: s + 1.5,
+            dark_s: s - 1.5,
+            ramp_slope: 50.0,
+            clipped: false,
+        };
+        ShadedEdge::new(dir, &e, [light_slope, dark_slope], 2.0)
+    }
+
+    /// Something dark beyond the step pulls its light side down alone; a
+    /// light added over both sides slopes them alike; a canopy shaded
+    /// toward the disc brightens outward. Only the first is beside dark.
+    #[test]
+    fn only_a_light_side_falling_alone_is_beside_dark() {
+        let mut edges: Vec<ShadedEdge> =
+            (0..12).map(|_| edge([1.0, 0.0], 40.0, 3.0, 0.0)).collect();
+        edges.push(edge([1.0, 0.0], 40.0, -40.0, 0.0));
+        edges.push(edge([1.0, 0.0], 40.0, -40.0, -40.0));
+        edges.push(edge([1.0, 0.0], 40.0, 12.0, 0.0));
+        // Noise alone: 3 sigmas of the difference of two slopes.
+        let sigma = std::f64::consts::SQRT_2 * 2.0 * rim::SLOPE_NOISE_PER_GRAY;
+        edges.push(edge([1.0, 0.0], 40.0, (-2.5 * sigma) as f32, 0.0));
+        let beside = beside_dark(&edges, 3.0);
+        assert_eq!(beside[..12], [false; 12]);
+        assert_eq!(beside[12..], [true, false, false, false]);
+    }
+
+    /// A circle of 40 px, 200 edges with noise of 0.1 px. A probe's
+    /// outline beside ten of them moves each in by over half a pixel: the
+    /// rim is better without them. A glare's skirt over a third of the rim
+    /// moves each in by 0.025 px: the ellipse moves less than the rest of
+    /// the rim would place it without them, and they stay.
+    #[test]
+    fn edges_are_left_out_only_where_that_moves_the_ellipse_less() {
+        let circle = Ellipse::new(100.0, 80.0, 40.0, 40.0, 0.0);
+        let n = 200;
+        let dirs: Vec<[f64; 2]> = (0..n)
+            .map(|k| {
+                let t = std::f64::consts::TAU * k as f64 / n as f64;
+                [t.cos(), t.sin()]
+            })
+            .collect();
+        let points: Vec<[f64; 2]> = dirs
+            .iter()
+            .map(|d| [circle.cx + 40.0 * d[0], circle.cy + 40.0 * d[1]])
+            .collect();
+        let kept = vec![true; n];
+        // A fall of 0.5 (contrast) per pixel on the light side: 0.625 px in.
+        let with_falls = |beside: &[bool], fall: f32| -> Vec<ShadedEdge> {
+            dirs.iter()
+                .zip(beside)
+                .map(|(&d, &b)| edge(d, 40.0, if b { -100.0 * fall } else { 0.0 }, 0.0))
+                .collect()
+        };
+        let probe: Vec<bool> = (0..n).map(|k| (20..30).contains(&k)).collect();
+        let edges = with_falls(&probe, 0.5);
+        assert!((own_fall_shift_px(&edges[25], 0.0) + 0.625).abs() < 1e-9);
+        assert!(better_without(&circle, &points, &edges, &kept, &probe, 0.1));
+
+        let glare: Vec<bool> = (0..n).map(|k| k < n / 3).collect();
+        let edges = with_falls(&glare, 0.02);
+        assert!((own_fall_shift_px(&edges[5], 0.0) + 0.025).abs() < 1e-9);
+        assert!(!better_without(
+            &circle, &points, &edges, &kept, &glare, 0.1
+        ));
+        // The same skirt moving its edges in by as much as the probe's.
+        let edges = with_falls(&glare, 0.5);
+        assert!(better_without(&circle, &points, &edges, &kept, &glare, 0.1));
+    }
 }

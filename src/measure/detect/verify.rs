@@ -634,7 +634,7 @@ impl Detector {
     /// The edge the pose is measured from on the ray whose detection edge
     /// `e` was found on `self.profile` (smoothed with `half`, the raw
     /// samples then in `self.raw_profile`; from `s0` every 0.5 px), and its
-    /// light side's slope. On a faint step the raw profile is smoothed
+    /// light and dark sides' slopes. On a faint step the raw profile is smoothed
     /// further, in proportion to the step's contrast
     /// ([`smoothing_half_for_contrast`], at most `cap`), into `faint`; the
     /// step found there is kept when it is the same step.
@@ -645,9 +645,15 @@ impl Detector {
         cap: usize,
         s0: f64,
         faint: &mut Vec<f32>,
-    ) -> (rim::RayEdge, f32) {
+    ) -> (rim::RayEdge, [f32; 2]) {
         let min_contrast = self.cfg.min_contrast_gray as f32;
-        let own = || (*e, rim::light_side_slope(&self.profile, s0, 0.5, e));
+        let sides = |p: &[f32], e: &rim::RayEdge| {
+            [
+                rim::light_side_slope(p, s0, 0.5, e),
+                rim::dark_side_slope(p, s0, 0.5, e),
+            ]
+        };
+        let own = || (*e, sides(&self.profile, e));
         let m_half =
             smoothing_half_for_contrast(self.noise_gray, f64::from(e.light - e.dark)).min(cap);
         if m_half <= half {
@@ -672,7 +678,7 @@ impl Detector {
         if (m.s - e.s).abs() > reach.max(e.light_s - e.s) {
             return own();
         }
-        (m, rim::light_side_slope(faint, s0, 0.5, &m))
+        (m, sides(faint, &m))
     }
 
     /// The steps that rise onto a light bar lying over the dark shape (a
@@ -889,14 +895,18 @@ impl Detector {
             steps.points_px.push(p);
             steps.undistorted.push(self.camera.undistort_px(p));
             if rim_use == RimUse::Measure {
-                let (measured, light_slope) = self.measured_edge(&e, half, cap, s0, &mut faint);
+                let (measured, [light_slope, dark_slope]) =
+                    self.measured_edge(&e, half, cap, s0, &mut faint);
                 steps.measured_px.push([
                     centre[0] + measured.s * dir[0],
                     centre[1] + measured.s * dir[1],
                 ]);
-                steps
-                    .shading
-                    .push(ShadedEdge::new(dir, &measured, light_slope));
+                steps.shading.push(ShadedEdge::new(
+                    dir,
+                    &measured,
+                    [light_slope, dark_slope],
+                    self.noise_gray,
+                ));
             }
             steps.contrasts.push(f64::from(e.light - e.dark));
             steps.mid_levels.push(0.5 * (e.dark + e.light));
