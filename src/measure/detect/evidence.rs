@@ -2,7 +2,7 @@
 //! sharpness of its steps, the canopy's rim where its pose puts it, and the
 //! score that ranks the candidates.
 
-use super::shading::{beside_dark, better_without, shaded_points};
+use super::shading::{beside_dark, better_without, canopy_slope, shaded_points};
 use super::verify::{CLIPPED_SHARE, FillLevels, PoseEdges, RimPass};
 use super::{
     Detector, Reject, SATURATED_GRAY, SHARP_STEP_OWN_PX, VEIL_MIN_GRAY, VEIL_SIGMAS, Verified,
@@ -418,16 +418,21 @@ impl MeasuredRim {
                 pick(points_px.iter().copied(), &kept),
                 pick(undistorted, &kept),
             ),
-            PoseEdges::Shaded { base_px, shading } => {
+            PoseEdges::Shaded {
+                base_px,
+                shading,
+                found_undistorted,
+            } => {
                 // Only a sharp step has its two sides' slopes where they
                 // were measured: a blurred one's lie in the blur's tails.
-                let mut beside = beside_dark(&shading, BESIDE_DARK_SIGMAS);
+                let canopy = canopy_slope(&shading);
+                let mut beside = beside_dark(&shading, canopy, BESIDE_DARK_SIGMAS);
                 for (b, w) in beside.iter_mut().zip(&step_widths_px) {
                     *b &= *w <= SHARP_STEP_PX;
                 }
-                if beside.iter().zip(&kept).any(|(b, k)| *b && *k) {
-                    let undistorted: Vec<[f64; 2]> =
-                        base_px.iter().map(|&p| camera.undistort_px(p)).collect();
+                if let Some(canopy) = canopy
+                    && beside.iter().zip(&kept).any(|(b, k)| *b && *k)
+                {
                     let mut kept_residuals: Vec<f64> = residuals
                         .iter()
                         .zip(&kept)
@@ -436,7 +441,15 @@ impl MeasuredRim {
                         .map(|((r, _), _)| r.abs())
                         .collect();
                     let sigma_px = 1.4826 * median(&mut kept_residuals);
-                    if better_without(ellipse, &undistorted, &shading, &kept, &beside, sigma_px) {
+                    if better_without(
+                        ellipse,
+                        &found_undistorted,
+                        &shading,
+                        &kept,
+                        &beside,
+                        canopy,
+                        sigma_px,
+                    ) {
                         for (k, b) in kept.iter_mut().zip(&beside) {
                             *k &= !b;
                         }
@@ -444,7 +457,7 @@ impl MeasuredRim {
                 }
                 // The shading's slope is the whole pass's: moved first,
                 // then picked.
-                let moved = pick(shaded_points(&base_px, &shading), &kept);
+                let moved = pick(shaded_points(&base_px, &shading, canopy), &kept);
                 let undistorted = moved.iter().map(|&p| camera.undistort_px(p)).collect();
                 (moved, undistorted)
             }

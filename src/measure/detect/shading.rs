@@ -93,20 +93,17 @@ impl ShadedEdge {
 /// hazy sets). Less the part that levels taken at the edge itself leave: a
 /// box blur of width `L` (the step's width as seen, blur and smoothing
 /// together) over a side of slope `g` lifts the ramp's middle by `g L / 8`.
-/// The shading is one property of the canopy, so its slope is the median
-/// over the pass's rays of each ray's light-side slope relative to its
-/// contrast (one ray's slope, over a few samples, is mostly noise), and
-/// each ray's move is at most half the distance it corrects for.
-pub(super) fn shaded_points(points_px: &[[f64; 2]], edges: &[ShadedEdge]) -> Vec<[f64; 2]> {
-    let mut slopes: Vec<f64> = edges
-        .iter()
-        .map(|e| e.relative_slope)
-        .filter(|s| s.is_finite())
-        .collect();
-    if slopes.len() < points_px.len() / 2 || slopes.is_empty() {
+/// The shading is one property of the canopy, so its slope is the pass's
+/// `canopy` ([`canopy_slope`]; the points stay where they are without
+/// it), and each ray's move is at most half the distance it corrects for.
+pub(super) fn shaded_points(
+    points_px: &[[f64; 2]],
+    edges: &[ShadedEdge],
+    canopy: Option<f64>,
+) -> Vec<[f64; 2]> {
+    let Some(relative_slope) = canopy else {
         return points_px.to_vec();
-    }
-    let relative_slope = median(&mut slopes);
+    };
     points_px
         .iter()
         .zip(edges)
@@ -125,15 +122,15 @@ pub(super) fn shaded_points(points_px: &[[f64; 2]], edges: &[ShadedEdge]) -> Vec
 }
 
 /// The canopy's slope beside the pass's steps, relative to their contrast:
-/// the median of their light sides' ([`shaded_points`]); `None` where none
-/// was measured.
-fn canopy_slope(edges: &[ShadedEdge]) -> Option<f64> {
+/// the median of their light sides' (one ray's, over a few samples, is
+/// mostly noise); `None` where fewer than half were measured.
+pub(super) fn canopy_slope(edges: &[ShadedEdge]) -> Option<f64> {
     let mut slopes: Vec<f64> = edges
         .iter()
         .map(|e| e.relative_slope)
         .filter(|s| s.is_finite())
         .collect();
-    (!slopes.is_empty()).then(|| median(&mut slopes))
+    (!slopes.is_empty() && slopes.len() >= edges.len() / 2).then(|| median(&mut slopes))
 }
 
 /// The edges whose light side falls toward something dark just beyond the
@@ -141,8 +138,8 @@ fn canopy_slope(edges: &[ShadedEdge]) -> Option<f64> {
 /// canopy's slope (the pass's median): an occluder (the probe, the hose)
 /// or a strut lies there, so the light level was taken partly on it, the
 /// step's mid level is too low and its crossing too far in.
-pub(super) fn beside_dark(edges: &[ShadedEdge], sigmas: f64) -> Vec<bool> {
-    let Some(canopy) = canopy_slope(edges) else {
+pub(super) fn beside_dark(edges: &[ShadedEdge], canopy: Option<f64>, sigmas: f64) -> Vec<bool> {
+    let Some(canopy) = canopy else {
         return vec![false; edges.len()];
     };
     // A canopy shaded toward the disc brightens outward: a step whose
@@ -190,17 +187,17 @@ pub(super) fn better_without(
     edges: &[ShadedEdge],
     kept: &[bool],
     beside: &[bool],
+    canopy: f64,
     sigma_px: f64,
 ) -> bool {
-    let Some(canopy) = canopy_slope(edges) else {
-        return false;
-    };
     if !(sigma_px.is_finite() && sigma_px > 0.0) {
         return false;
     }
     let (sin, cos) = ellipse.theta.sin_cos();
+    // The normal matrix of all the points and that of the ones beside dark
+    // (few): the rest's is the difference. Rank-one updates in place.
     let mut all = Matrix5::<f64>::zeros();
-    let mut left = Matrix5::<f64>::zeros();
+    let mut flagged = Matrix5::<f64>::zeros();
     let mut pull = Vector5::<f64>::zeros();
     for (i, p) in points.iter().enumerate() {
         if !kept[i] {
@@ -209,16 +206,15 @@ pub(super) fn better_without(
         let Some((j, normal)) = distance_derivatives(ellipse, sin, cos, *p) else {
             continue;
         };
-        let jjt = j * j.transpose();
-        all += jjt;
+        all.ger(1.0, &j, &j, 1.0);
         if beside[i] {
+            flagged.ger(1.0, &j, &j, 1.0);
             let e = &edges[i];
             let along_normal = e.dir[0] * normal[0] + e.dir[1] * normal[1];
             pull += j * (own_fall_shift_px(e, canopy) * along_normal);
-        } else {
-            left += jjt;
         }
     }
+    let left = all - flagged;
     let (Some(all_inv), Some(left_inv)) = (all.try_inverse(), left.try_inverse()) else {
         return false;
     };
@@ -243,13 +239,14 @@ fn distance_derivatives(
     let (dx, dy) = (p[0] - e.cx, p[1] - e.cy);
     let (x, y) = (cos * dx + sin * dy, -sin * dx + cos * dy);
     let (ct, st) = (x / e.a, y / e.b);
-    let r = ct.hypot(st);
+    // Plain square roots: pixel-sized values, no overflow to guard.
+    let r = (ct * ct + st * st).sqrt();
     if r.is_nan() || r <= 0.0 {
         return None;
     }
     let (ct, st) = (ct / r, st / r);
     let (nx, ny) = (ct / e.a, st / e.b);
-    let n = nx.hypot(ny);
+    let n = (nx * nx + ny * ny).sqrt();
     let (nx, ny) = (nx / n, ny / n);
     let (fx, fy) = (e.a * ct, e.b * st);
     let normal = [cos * nx - sin * ny, sin * nx + cos * ny];
@@ -296,7 +293,7 @@ mod tests {
         // Noise alone: 3 sigmas of the difference of two slopes.
         let sigma = std::f64::consts::SQRT_2 * 2.0 * rim::SLOPE_NOISE_PER_GRAY;
         edges.push(edge([1.0, 0.0], 40.0, (-2.5 * sigma) as f32, 0.0));
-        let beside = beside_dark(&edges, 3.0);
+        let beside = beside_dark(&edges, canopy_slope(&edges), 3.0);
         assert_eq!(beside[..12], [false; 12]);
         assert_eq!(beside[12..], [true, false, false, false]);
     }
@@ -331,16 +328,20 @@ mod tests {
         let probe: Vec<bool> = (0..n).map(|k| (20..30).contains(&k)).collect();
         let edges = with_falls(&probe, 0.5);
         assert!((own_fall_shift_px(&edges[25], 0.0) + 0.625).abs() < 1e-9);
-        assert!(better_without(&circle, &points, &edges, &kept, &probe, 0.1));
+        assert!(better_without(
+            &circle, &points, &edges, &kept, &probe, 0.0, 0.1
+        ));
 
         let glare: Vec<bool> = (0..n).map(|k| k < n / 3).collect();
         let edges = with_falls(&glare, 0.02);
         assert!((own_fall_shift_px(&edges[5], 0.0) + 0.025).abs() < 1e-9);
         assert!(!better_without(
-            &circle, &points, &edges, &kept, &glare, 0.1
+            &circle, &points, &edges, &kept, &glare, 0.0, 0.1
         ));
         // The same skirt moving its edges in by as much as the probe's.
         let edges = with_falls(&glare, 0.5);
-        assert!(better_without(&circle, &points, &edges, &kept, &glare, 0.1));
+        assert!(better_without(
+            &circle, &points, &edges, &kept, &glare, 0.0, 0.1
+        ));
     }
 }

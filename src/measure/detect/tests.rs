@@ -732,7 +732,8 @@ fn a_blurred_edge_on_a_shaded_canopy_is_placed_at_the_edge() {
         })
         .collect();
     let points = vec![[e.s, 0.0]; 12];
-    let moved = super::shading::shaded_points(&points, &edges);
+    let canopy = super::shading::canopy_slope(&edges);
+    let moved = super::shading::shaded_points(&points, &edges, canopy);
     for p in moved {
         assert!(
             (p[0] - edge).abs() < 0.05,

@@ -209,10 +209,14 @@ pub(super) enum PoseEdges {
     /// `points_px`).
     Own(Vec<[f64; 2]>),
     /// A measuring pass's edges (distorted pixels) and what moves each for
-    /// the canopy's shading ([`super::shading::shaded_points`]).
+    /// the canopy's shading ([`super::shading::shaded_points`]), with the
+    /// pass's own edges undistorted (within a fraction of a pixel of
+    /// them: where the ellipse is sensitive to each,
+    /// [`super::shading::better_without`]).
     Shaded {
         base_px: Vec<[f64; 2]>,
         shading: Vec<ShadedEdge>,
+        found_undistorted: Vec<[f64; 2]>,
     },
 }
 
@@ -1146,6 +1150,7 @@ impl Detector {
             RimUse::Measure => PoseEdges::Shaded {
                 base_px: measured_px,
                 shading,
+                found_undistorted: undistorted,
             },
             RimUse::Scout => PoseEdges::Own(undistorted),
         };
