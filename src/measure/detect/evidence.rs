@@ -470,9 +470,10 @@ impl MeasuredRim {
     }
 }
 
-/// A measured edge whose light side falls further than this many of its
-/// noise's standard deviations below the canopy's slope has something dark
-/// just beyond it ([`beside_dark`]).
+/// A measured edge whose light side falls faster than its dark side, by
+/// more than this many of the noise's standard deviations of that
+/// difference below the canopy's slope, has something dark just beyond it
+/// ([`beside_dark`]).
 const BESIDE_DARK_SIGMAS: f64 = 3.0;
 
 /// How much lighter the canopy's band is than the ring just outside a rim

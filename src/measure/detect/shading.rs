@@ -152,8 +152,8 @@ pub(super) fn beside_dark(edges: &[ShadedEdge], canopy: Option<f64>, sigmas: f64
 }
 
 /// Each edge's crossing displacement (pixels along its ray, negative
-/// inward) from its own light side falling faster than the canopy's
-/// `relative_slope` (the pass's median, as [`shaded_points`] corrects
+/// inward) from its own fall ([`ShadedEdge::own_fall`]) beyond the canopy's
+/// `relative_slope` (the pass's median, which [`shaded_points`] corrects
 /// for): the light level, taken a little beyond the step, is below the
 /// level at the edge, the mid level too low and the crossing too far in.
 /// The same first-order model as [`shaded_points`], at most half the
@@ -223,7 +223,9 @@ pub(super) fn better_without(
     let shift = all_inv * pull;
     let with = centre_and_axes(&shift) + sigma_px * sigma_px * trace4(&all_inv);
     let without = sigma_px * sigma_px * trace4(&left_inv);
-    without < with
+    // The rest's matrix is a difference: one that rounding has left
+    // indefinite (nearly every point beside dark) is no rim to keep.
+    without.is_finite() && without > 0.0 && without < with
 }
 
 /// The derivatives of a point's signed distance to the ellipse (outward
