@@ -137,7 +137,9 @@ pub(super) fn canopy_slope(edges: &[ShadedEdge]) -> Option<f64> {
 /// step, by more than the frame's noise allows (`sigmas` of it) below the
 /// canopy's slope (the pass's median): an occluder (the probe, the hose)
 /// or a strut lies there, so the light level was taken partly on it, the
-/// step's mid level is too low and its crossing too far in.
+/// step's mid level is too low and its crossing too far in. The noise is
+/// the raw samples': a profile smoothed for a faint step has less, so the
+/// test errs toward keeping a step.
 pub(super) fn beside_dark(edges: &[ShadedEdge], canopy: Option<f64>, sigmas: f64) -> Vec<bool> {
     let Some(canopy) = canopy else {
         return vec![false; edges.len()];
@@ -199,17 +201,19 @@ pub(super) fn better_without(
     let mut all = Matrix5::<f64>::zeros();
     let mut flagged = Matrix5::<f64>::zeros();
     let mut pull = Vector5::<f64>::zeros();
-    for (i, p) in points.iter().enumerate() {
-        if !kept[i] {
+    // Zipped, not indexed: slices of unequal length end at the shortest.
+    for (((p, e), &keep), &dark) in points.iter().zip(edges).zip(kept).zip(beside) {
+        if !keep {
             continue;
         }
         let Some((j, normal)) = distance_derivatives(ellipse, sin, cos, *p) else {
             continue;
         };
         all.ger(1.0, &j, &j, 1.0);
-        if beside[i] {
+        if dark {
             flagged.ger(1.0, &j, &j, 1.0);
-            let e = &edges[i];
+            // The ray's direction is the frame's (distorted), the normal
+            // the undistorted ellipse's: alike to first order over a rim.
             let along_normal = e.dir[0] * normal[0] + e.dir[1] * normal[1];
             pull += j * (own_fall_shift_px(e, canopy) * along_normal);
         }
