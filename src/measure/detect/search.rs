@@ -28,6 +28,10 @@ const INNER_REACH_OUTER_RADII: f64 = 0.8;
 /// Random stream of an inner-disc seed, apart from its outer seed's.
 const INNER_SEED_STREAM: u64 = 0x1_0000;
 
+/// Kind of the seed of the disc inside an edge circle that did not verify
+/// ([`Detector::disc_inside`]).
+const KIND_INSIDE_EDGE_CIRCLE: u8 = 10;
+
 /// Circles of the edge source verified per frame, strongest first.
 const EDGE_SEEDS: usize = 4;
 /// Circles the edge source gives around its first ones once their rims are
@@ -106,7 +110,9 @@ pub(super) struct Seed {
     /// [`Detector::prefer_inner_disc`]); 5-7 as 0-2, of a region of the
     /// locally normalised frame ([`Detector::try_local_contrast`]); 8 a
     /// circle of the edge source nested with a stronger one; 9 a circle of
-    /// the edge source looked for past what lies inside it.
+    /// the edge source looked for past what lies inside it; 10 the disc
+    /// looked for inside a circle of the edge source that did not verify
+    /// as the disc (see [`Detector::disc_inside`]).
     pub(super) kind: u8,
 }
 
@@ -400,7 +406,7 @@ impl Detector {
             kind: 3,
             stream: 1000,
         };
-        self.try_edge_circles(image, &circles, first, accept, tried, verified);
+        let mut rings = self.try_edge_circles(image, &circles, first, accept, tried, verified);
         // Circles nested with those (the disc around the probe's tip),
         // when still no candidate scored `accept`: their first pass
         // starts inside their own rim, so that it does not take the
@@ -415,7 +421,7 @@ impl Detector {
                 kind: 8,
                 stream: 1500,
             };
-            self.try_edge_circles(image, &nested, around, accept, tried, verified);
+            rings.extend(self.try_edge_circles(image, &nested, around, accept, tried, verified));
         }
         // The first circles again, their first pass starting past
         // what lies inside them, when still none scored `accept`: the
@@ -430,12 +436,26 @@ impl Detector {
                 kind: 9,
                 stream: 1700,
             };
-            self.try_edge_circles(image, &circles, past_inside, accept, tried, verified);
+            rings.extend(self.try_edge_circles(
+                image,
+                &circles,
+                past_inside,
+                accept,
+                tried,
+                verified,
+            ));
+        }
+        // Last, the disc inside each circle that was a ring or showed no
+        // canopy, when still none scored `accept`.
+        if !any_accepted(verified, accept) {
+            self.try_discs_inside(image, &rings, accept, tried, verified);
         }
     }
 
     /// Tries the edge source's `circles` as seeds of `how`, strongest
     /// first, until one scores `accept`; seeds tried before are skipped.
+    /// Gives the seeds (with their random streams) that verified as a ring
+    /// or without a canopy, for [`Self::try_discs_inside`].
     fn try_edge_circles(
         &mut self,
         image: &GrayImage,
@@ -444,7 +464,8 @@ impl Detector {
         accept: f64,
         tried: &mut Vec<Seed>,
         verified: &mut Vec<Verified>,
-    ) {
+    ) -> Vec<(Seed, u64)> {
+        let mut rings = Vec::new();
         for (i, c) in circles.iter().enumerate() {
             let seed = Seed {
                 centre_px: c.centre_px,
@@ -460,10 +481,79 @@ impl Detector {
             }
             tried.push(seed.clone());
             tracing::debug!(strength = c.strength, kind = how.kind, "edge source circle");
-            if self.try_seed(image, &seed, how.stream + i as u64, accept, verified) == Ok(true) {
+            let index = how.stream + i as u64;
+            match self.try_seed(image, &seed, index, accept, verified) {
+                Ok(true) => break,
+                // A ring (light inside), or a circle whose predicted canopy
+                // does not show: it may be the canopy's own rim band.
+                Err(Reject::NoCanopy(_) | Reject::LightInside(_)) => rings.push((seed, index)),
+                _ => {}
+            }
+        }
+        rings
+    }
+
+    /// The discs inside the edge source's `rings` (seeds with their random
+    /// streams), tried as seeds ([`Self::disc_inside`]) until one scores
+    /// `accept`. A saturated glare streak across the disc leaves two dark
+    /// slivers of it, and the canopy's rim band, whole but for the streak's
+    /// width, is then the frame's roundest dark edge: its circle takes the
+    /// disc's votes with its own (one centre), and verified as the disc it
+    /// shows no canopy beyond it. Cold: only frames where nothing else
+    /// verified get here.
+    #[cold]
+    fn try_discs_inside(
+        &mut self,
+        image: &GrayImage,
+        rings: &[(Seed, u64)],
+        accept: f64,
+        tried: &mut Vec<Seed>,
+        verified: &mut Vec<Verified>,
+    ) {
+        for (ring, index) in rings {
+            let Some(inner) = self
+                .disc_inside(ring, KIND_INSIDE_EDGE_CIRCLE)
+                .filter(|s| s.b_px >= self.min_radius_px)
+            else {
+                continue;
+            };
+            if tried.iter().any(|t| t.same_as(&inner)) {
+                continue;
+            }
+            tried.push(inner.clone());
+            let stream = index ^ INNER_SEED_STREAM;
+            if self.try_seed(image, &inner, stream, accept, verified) == Ok(true) {
                 break;
             }
         }
+    }
+
+    /// The disc's size as a share of the canopy rim's, `r / R`, when it is
+    /// one (a configuration may give no canopy larger than the disc).
+    fn disc_share(&self) -> Option<f64> {
+        let ratio = self.drogue.inner_radius_m / self.drogue.canopy_radius_m;
+        (ratio.is_finite() && ratio > 0.0 && ratio < 1.0).then_some(ratio)
+    }
+
+    /// The seed of the disc concentric inside `outer` at `r / R` of its
+    /// size, as `kind`, for where `outer` may be the canopy's outer rim
+    /// (under haze or a glare its step to the sky can be the strongest
+    /// round one): its first ray pass looks from the centre out to well
+    /// inside the outer rim ([`INNER_REACH_OUTER_RADII`]), where the disc's
+    /// step is the strongest rise. `None` without a share `r / R`
+    /// ([`Self::disc_share`]).
+    fn disc_inside(&self, outer: &Seed, kind: u8) -> Option<Seed> {
+        let ratio = self.disc_share()?;
+        Some(Seed {
+            centre_px: outer.centre_px,
+            a_px: outer.a_px * ratio,
+            b_px: outer.b_px * ratio,
+            theta: outer.theta,
+            // The wide pass reaches `reach * r + 4` px (r the seed's radius).
+            reach: ((INNER_REACH_OUTER_RADII * outer.b_px - 4.0) / (ratio * outer.b_px)).max(1.0),
+            from: 0.0,
+            kind,
+        })
     }
 
     /// The local-contrast source ([`coarse::LocalContrast`]): in each of the
@@ -642,22 +732,18 @@ impl Detector {
         outer: Verified,
         index: u64,
     ) -> Verified {
-        let ratio = self.drogue.inner_radius_m / self.drogue.canopy_radius_m;
-        if !(ratio.is_finite() && ratio > 0.0 && ratio < 1.0) {
-            return outer;
-        }
         let e = outer.ellipse;
-        // The inner rim is looked for from the centre out to well inside
-        // the outer one: there the disc's step is the strongest rise.
-        let seed = Seed {
+        let as_seed = Seed {
             centre_px: self.camera.distort_px([e.cx, e.cy]),
-            a_px: e.a * ratio,
-            b_px: e.b * ratio,
+            a_px: e.a,
+            b_px: e.b,
             theta: e.theta,
-            // The wide pass reaches `reach * r + 4` px (r the seed's radius).
-            reach: ((INNER_REACH_OUTER_RADII * e.b - 4.0) / (ratio * e.b)).max(1.0),
+            reach: 1.0,
             from: 0.0,
             kind: 4,
+        };
+        let (Some(ratio), Some(seed)) = (self.disc_share(), self.disc_inside(&as_seed, 4)) else {
+            return outer;
         };
         // First the narrow passes where the disc must be, concentric at
         // `r / R` of the outer rim: their window (a tenth of the radius)
