@@ -733,6 +733,9 @@ impl Detector {
         index: u64,
     ) -> Verified {
         let e = outer.ellipse;
+        // The verified ellipse where a seed would be: its centre in the
+        // frame's (distorted) pixels, as seeds are; its own reach and kind
+        // are not used, the disc inside it gets its own.
         let as_seed = Seed {
             centre_px: self.camera.distort_px([e.cx, e.cy]),
             a_px: e.a,
