@@ -382,6 +382,30 @@ fn a_disc_cut_in_two_by_glare_is_found_inside_its_canopy_ring() {
     assert!(wrong.is_empty(), "{wrong:#?}");
 }
 
+/// The disc looked for inside a ring finds none where there is no drogue:
+/// on these drogue-free rings without a canopy and crescents (seeds 1-32)
+/// the edge source's circle verified as a ring (`LightInside`), the disc
+/// inside it was tried (their miss reason is now that seed's, `NoCanopy`
+/// at 0-0.03), and none is detected.
+#[test]
+fn the_inside_of_a_ring_without_a_canopy_is_no_drogue() {
+    let mut found = detections_on(
+        "no drogue: ring without canopy",
+        &[
+            (1, 25),
+            (3, 0),
+            (5, 9),
+            (7, 18),
+            (9, 1),
+            (12, 10),
+            (17, 1),
+            (32, 26),
+        ],
+    );
+    found.extend(detections_on("no drogue: crescent", &[(10, 20), (26, 8)]));
+    assert!(found.is_empty(), "{found:#?}");
+}
+
 /// Clear drogues in noise (`everything`: read noise 2-8 DN, haze): the
 /// canopy test's polarity-free edge took the drogue's end at the outermost
 /// box mean off the sky's level by `min_contrast_gray`, and in noise a
