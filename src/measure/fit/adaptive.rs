@@ -323,9 +323,10 @@ pub(crate) fn fit(
     // 5. A short inlier run cut off by hidden stretches on both sides may be
     // an occluder's outline the fit has bent towards (see `guard`): the fit
     // without it, refitted on all points, replaces this one when it has the
-    // lower truncated cost within the tighter of the two bands. A count of
-    // points within the band cannot tell them apart: both bands are often
-    // at the pixel floor, which both fits' points are well within.
+    // lower truncated cost within the tightest of the two bands and this
+    // fit's noise band. A count of points within the band cannot tell them
+    // apart: both bands are often at the pixel floor, which both fits'
+    // points are well within.
     let isolated = guard::isolated_inlier_runs(xy, [model.cx, model.cy], &inliers);
     if isolated.iter().any(|&f| f) {
         let selected: Vec<[f64; 2]> = xy
@@ -339,7 +340,14 @@ pub(crate) fn fit(
             .then(|| refit_on_all(xy, start, band, cfg, min_band, residual_sq, sorted))
             .flatten();
         if let Some((alt_model, alt_inliers, alt_band)) = alternative {
-            let common = band.min(alt_band);
+            // A point left out is priced by the points' noise (the first
+            // fit's, which the alternative cannot shrink by leaving points
+            // out), not by the band's pixel floor: the floor (for blurred,
+            // wobbling edges) is often several sigmas wide, and a run a
+            // pixel off the rim then costs the alternative more than the
+            // bend it puts into the first fit costs that one.
+            let noise = noise_band(xy, &model, &inliers, cfg, residual_sq, sorted);
+            let common = band.min(alt_band).min(noise);
             if truncated_cost(xy, &alt_model, common) < truncated_cost(xy, &model, common) {
                 model = alt_model;
                 inliers = alt_inliers;
@@ -347,6 +355,20 @@ pub(crate) fn fit(
         }
     }
     Ok((model, inliers))
+}
+
+/// `adaptive_inlier_sigmas` robust sigmas of `model`'s residuals on its
+/// inliers, without the band's pixel floor.
+fn noise_band(
+    xy: &[[f64; 2]],
+    model: &Ellipse,
+    inliers: &[bool],
+    cfg: &FitConfig,
+    residual_sq: &mut Vec<f64>,
+    sorted: &mut Vec<f64>,
+) -> f64 {
+    residuals_sq(xy, model, residual_sq);
+    cfg.adaptive_inlier_sigmas * robust_sigma(residual_sq, inliers, sorted)
 }
 
 /// Stage 4, a model on all points: Taubin rounds from `model` until the

@@ -513,7 +513,7 @@ mod tests {
     /// the probe's outline instead, 0-10 px outside the rim, whose concave
     /// bottom comes within 4 px of it; -12 to 50 degrees found nothing.
     fn rim_beside_a_probe(seed: u64) -> (Ellipse, Vec<[f64; 2]>) {
-        use rand::{Rng, SeedableRng};
+        use rand::SeedableRng;
         let truth = Ellipse::new(622.86, 657.57, 76.57, 75.84, -1.309);
         // Outward offset of the probe's outline (degrees, pixels).
         let outline = [
@@ -541,17 +541,53 @@ mod tests {
             if (-12.0..50.0).contains(&deg) {
                 continue;
             }
-            // The point of the ellipse in direction `deg` from its centre.
             let t = deg.to_radians();
-            let (u, v) = (t.cos(), t.sin());
-            let (s, c) = truth.theta.sin_cos();
-            let (x, y) = (u * c + v * s, -u * s + v * c);
-            let r = 1.0 / ((x / truth.a).powi(2) + (y / truth.b).powi(2)).sqrt();
-            // Box-Muller: one normal draw.
-            let (p, q): (f64, f64) = (rng.random::<f64>().max(1e-12), rng.random());
-            let noise = 0.06 * (-2.0 * p.ln()).sqrt() * (std::f64::consts::TAU * q).cos();
-            let radius = r + offset(deg).unwrap_or(0.0) + noise;
-            pts.push([truth.cx + radius * u, truth.cy + radius * v]);
+            let radius =
+                radius_towards(&truth, t) + offset(deg).unwrap_or(0.0) + 0.06 * normal(&mut rng);
+            pts.push([truth.cx + radius * t.cos(), truth.cy + radius * t.sin()]);
+        }
+        (truth, pts)
+    }
+
+    /// The distance from `e`'s centre to its rim in direction `t` (radians).
+    fn radius_towards(e: &Ellipse, t: f64) -> f64 {
+        let (u, v) = (t.cos(), t.sin());
+        let (s, c) = e.theta.sin_cos();
+        let (x, y) = (u * c + v * s, -u * s + v * c);
+        1.0 / ((x / e.a).powi(2) + (y / e.b).powi(2)).sqrt()
+    }
+
+    /// One standard normal draw (Box-Muller).
+    fn normal(rng: &mut impl rand::Rng) -> f64 {
+        let (p, q): (f64, f64) = (rng.random::<f64>().max(1e-12), rng.random());
+        (-2.0 * p.ln()).sqrt() * (std::f64::consts::TAU * q).cos()
+    }
+
+    /// A rim seen as in the simulator with the probe's body across the
+    /// disc's lower side (sweep seed 15, probe occlusion 30-40 %, frame
+    /// 46, where the edge passes 1.15 px outside): rim points every 0.9
+    /// degrees with 0.07 px noise; from 87 to 124 degrees the rays find the
+    /// probe's straight lower edge, which passes 0.9 px outside the rim at
+    /// 105 degrees; 40-87 and 124-157 degrees found nothing.
+    fn rim_beside_a_probe_edge(seed: u64) -> (Ellipse, Vec<[f64; 2]>) {
+        use rand::SeedableRng;
+        let truth = Ellipse::new(390.76, 737.08, 63.75, 61.17, -1.054);
+        let closest = 105f64.to_radians();
+        let edge_distance = radius_towards(&truth, closest) + 0.9;
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+        let mut pts = Vec::new();
+        for k in 0..400 {
+            let deg = 0.9 * f64::from(k);
+            if (40.0..87.0).contains(&deg) || (124.0..157.0).contains(&deg) {
+                continue;
+            }
+            let t = deg.to_radians();
+            let radius = if (87.0..124.0).contains(&deg) {
+                edge_distance / (t - closest).cos()
+            } else {
+                radius_towards(&truth, t)
+            } + 0.07 * normal(&mut rng);
+            pts.push([truth.cx + radius * t.cos(), truth.cy + radius * t.sin()]);
         }
         (truth, pts)
     }
@@ -564,6 +600,28 @@ mod tests {
         let mut fitter = Fitter::new(&cfg());
         for seed in 0..40 {
             let (truth, pts) = rim_beside_a_probe(seed);
+            let fitted = fitter.fit(&pts, seed).unwrap();
+            let e = fitter.without_occluder_edges(&pts, fitted).ellipse;
+            let centre = (e.cx - truth.cx).hypot(e.cy - truth.cy);
+            let axes = (e.a - truth.a).abs().max((e.b - truth.b).abs());
+            assert!(
+                centre < 0.1 && axes < 0.1,
+                "seed {seed}: centre {centre:.3} px, axes {axes:.3} px off"
+            );
+        }
+    }
+
+    #[test]
+    fn a_probe_edge_a_pixel_outside_the_rim_does_not_bend_the_fit() {
+        // Before the comparison priced a left-out point by the points'
+        // noise rather than the band's 0.5 px floor, the edge's points
+        // within that floor bent the fit toward them in 38 of these 40
+        // seeds (about 0.3 px off centre and 0.3 px too big). An edge 0.6
+        // px outside still bends it in about half the seeds: see README,
+        // "Probe occlusion".
+        let mut fitter = Fitter::new(&cfg());
+        for seed in 0..40 {
+            let (truth, pts) = rim_beside_a_probe_edge(seed);
             let fitted = fitter.fit(&pts, seed).unwrap();
             let e = fitter.without_occluder_edges(&pts, fitted).ellipse;
             let centre = (e.cx - truth.cx).hypot(e.cy - truth.cy);
