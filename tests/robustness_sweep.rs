@@ -388,9 +388,9 @@ fn a_disc_cut_in_two_by_glare_is_found_inside_its_canopy_ring() {
 /// the fit without them was charged that floor for each point it left
 /// out. Priced at the rim's noise instead, the fit without them wins.
 /// These frames (seeds 1-32, probe over 30-40 % of the rim, and seed 15's
-/// frame 46 of `pose_nees`) were each 0.4-0.7 px off centre; each must now
-/// be within 0.15 px of the simulator's ellipse, centre and axes (the
-/// level's mean centre error is 0.015 px).
+/// frame 46 of `pose_nees`) were each 0.38-0.68 px off centre; each must
+/// now be within 0.15 px of the simulator's ellipse, centre and axes (the
+/// level's centre median is about 0.015 px).
 #[test]
 fn the_probes_edge_beside_the_rim_does_not_bend_the_fit() {
     let levels = standard_levels();

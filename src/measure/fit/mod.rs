@@ -616,9 +616,9 @@ mod tests {
         // Before the comparison priced a left-out point by the points'
         // noise rather than the band's 0.5 px floor, the edge's points
         // within that floor bent the fit toward them in 38 of these 40
-        // seeds (about 0.3 px off centre and 0.3 px too big). An edge 0.6
-        // px outside still bends it in about half the seeds: see README,
-        // "Probe occlusion".
+        // seeds (seed 0: 0.35 px off centre, an axis 0.38 px too long). An
+        // edge 0.6 px outside still bends it in about half the seeds: see
+        // README, "Ellipse fitting", *Why the noise caps the cost*.
         let mut fitter = Fitter::new(&cfg());
         for seed in 0..40 {
             let (truth, pts) = rim_beside_a_probe_edge(seed);
