@@ -105,7 +105,8 @@ pub struct FitConfig {
     /// Adaptive: the inlier band shrinks to this many robust sigmas of the
     /// residuals.
     pub adaptive_inlier_sigmas: f64,
-    /// Adaptive: the inlier band never gets narrower than this, pixels.
+    /// Adaptive: the inlier band never gets narrower than this, pixels
+    /// (not the cap of stage 5's comparison, which is the rim's noise).
     pub adaptive_inlier_min_px: f64,
     /// Adaptive: at most this many rounds of (select inliers, Taubin refit)
     /// per candidate.
