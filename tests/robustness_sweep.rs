@@ -463,6 +463,25 @@ fn the_inside_of_a_ring_without_a_canopy_is_no_drogue() {
     assert!(found.is_empty(), "{found:#?}");
 }
 
+/// A glare streak 30 px wide across a disc of about 26 px radius at 7-8 m
+/// leaves two slivers of it; the seeds on them settle on the slivers' own
+/// outlines, and the seed that settles on the canopy's outer rim (the
+/// roundest edge there, whole but for the streak) shows no canopy beyond
+/// it (`NoCanopy`). The disc is now looked for inside every settled rim
+/// that shows no canopy, concentric at `r / R` of its size, by the narrow
+/// passes (which take no rim point on a step into saturation). These
+/// frames (seeds 1-32) were undetected; each is now the disc, right by the
+/// sweep's own measure.
+#[test]
+fn the_disc_is_looked_for_inside_a_rim_that_shows_no_canopy() {
+    let mut wrong = frames_not_the_disc(
+        "glare streak 30 px wide",
+        &[(19, 1, true), (23, 21, true), (28, 9, true)],
+    );
+    wrong.extend(everything_frames_not_the_disc(&[(1, 27, true)]));
+    assert!(wrong.is_empty(), "{wrong:#?}");
+}
+
 /// Clear drogues in noise (`everything`: read noise 2-8 DN, haze): the
 /// canopy test's polarity-free edge took the drogue's end at the outermost
 /// box mean off the sky's level by `min_contrast_gray`, and in noise a

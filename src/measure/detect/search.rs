@@ -530,7 +530,7 @@ impl Detector {
 
     /// The disc's size as a share of the canopy rim's, `r / R`, when it is
     /// one (a configuration may give no canopy larger than the disc).
-    fn disc_share(&self) -> Option<f64> {
+    pub(super) fn disc_share(&self) -> Option<f64> {
         let ratio = self.drogue.inner_radius_m / self.drogue.canopy_radius_m;
         (ratio.is_finite() && ratio > 0.0 && ratio < 1.0).then_some(ratio)
     }
@@ -715,6 +715,47 @@ impl Detector {
         self.drogue
             .canopy_rim_around(&candidate.ellipse)
             .contains(u, v)
+    }
+
+    /// The disc inside `outer` (undistorted), a settled rim whose own
+    /// canopy did not show: where that rim is the canopy's outer rim, the
+    /// disc is concentric inside it at `r / R` of its size, and narrow
+    /// passes there find the parts of its rim a glare streak leaves. Kept
+    /// only when it settles nested in `outer` ([`INNER_SIZE_TOLERANCE`],
+    /// [`INNER_OFFSET_RADII`]) with its canopy judged and shown: the rim it
+    /// predicts is `outer`'s.
+    pub(super) fn disc_inside_rim(
+        &mut self,
+        image: &GrayImage,
+        outer: &Ellipse,
+    ) -> Option<Verified> {
+        let ratio = self.disc_share()?;
+        let predicted = Ellipse::new(
+            outer.cx,
+            outer.cy,
+            outer.a * ratio,
+            outer.b * ratio,
+            outer.theta,
+        );
+        if !self.plausible(&predicted, 1.0) {
+            return None;
+        }
+        let inner = self.verify_as_scout(image, &predicted).ok()?;
+        let size = inner.ellipse.a / outer.a;
+        let offset = (inner.ellipse.cx - outer.cx).hypot(inner.ellipse.cy - outer.cy);
+        let nested = (size - ratio).abs() <= INNER_SIZE_TOLERANCE * ratio
+            && offset <= INNER_OFFSET_RADII * inner.ellipse.a;
+        let shown = inner
+            .canopy
+            .is_some_and(|c| c >= self.cfg.min_canopy_fraction);
+        tracing::debug!(
+            outer_axes_px = ?[outer.a.round(), outer.b.round()],
+            inner_axes_px = ?[inner.ellipse.a.round(), inner.ellipse.b.round()],
+            nested,
+            canopy = ?inner.canopy,
+            "disc inside a rim without a canopy"
+        );
+        (nested && shown).then_some(inner)
     }
 
     /// The canopy's outer rim taken for the disc (under haze its step to

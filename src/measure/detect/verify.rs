@@ -428,7 +428,16 @@ impl Detector {
         if self.known_rim(known, &pass.ellipse) {
             return Err(Reject::Known);
         }
-        self.score(image, pass)
+        // A rim without a canopy beyond it may be the canopy's own outer
+        // rim (a glare streak across the disc leaves the rim band the
+        // roundest edge near it): the disc is then inside it.
+        let settled = pass.ellipse;
+        match self.score(image, pass) {
+            Err(Reject::NoCanopy(seen)) => self
+                .disc_inside_rim(image, &settled)
+                .ok_or(Reject::NoCanopy(seen)),
+            scored => scored,
+        }
     }
 
     /// Whether `e` is the rim of a candidate in `known`, or that
