@@ -69,6 +69,16 @@ fn ends_search(v: &Verified, accept: f64) -> bool {
     v.score >= accept || v.canopy.is_some_and(|c| c >= CANOPY_CONFIRMS)
 }
 
+/// Whether `inner` lies where the disc inside `outer` (its canopy's outer
+/// rim) must: its size within [`INNER_SIZE_TOLERANCE`] of `ratio` (`r /
+/// R`) of `outer`'s, its centre within [`INNER_OFFSET_RADII`] of its
+/// radius of `outer`'s.
+fn nested_disc(inner: &Ellipse, outer: &Ellipse, ratio: f64) -> bool {
+    let size = inner.a / outer.a;
+    let offset = (inner.cx - outer.cx).hypot(inner.cy - outer.cy);
+    (size - ratio).abs() <= INNER_SIZE_TOLERANCE * ratio && offset <= INNER_OFFSET_RADII * inner.a
+}
+
 fn any_accepted(verified: &[Verified], accept: f64) -> bool {
     verified.iter().any(|v| ends_search(v, accept))
 }
@@ -741,10 +751,7 @@ impl Detector {
             return None;
         }
         let inner = self.verify_as_scout(image, &predicted).ok()?;
-        let size = inner.ellipse.a / outer.a;
-        let offset = (inner.ellipse.cx - outer.cx).hypot(inner.ellipse.cy - outer.cy);
-        let nested = (size - ratio).abs() <= INNER_SIZE_TOLERANCE * ratio
-            && offset <= INNER_OFFSET_RADII * inner.ellipse.a;
+        let nested = nested_disc(&inner.ellipse, outer, ratio);
         let shown = inner
             .canopy
             .is_some_and(|c| c >= self.cfg.min_canopy_fraction);
@@ -808,10 +815,7 @@ impl Detector {
                 return outer;
             }
         };
-        let size = inner.ellipse.a / e.a;
-        let offset = (inner.ellipse.cx - e.cx).hypot(inner.ellipse.cy - e.cy);
-        let nested = (size - ratio).abs() <= INNER_SIZE_TOLERANCE * ratio
-            && offset <= INNER_OFFSET_RADII * inner.ellipse.a;
+        let nested = nested_disc(&inner.ellipse, &e, ratio);
         let strong = inner.rim_contrast >= INNER_CONTRAST_SHARE * outer.rim_contrast;
         tracing::debug!(
             outer_axes_px = ?[e.a.round(), e.b.round()],
