@@ -540,7 +540,7 @@ impl Detector {
 
     /// The disc's size as a share of the canopy rim's, `r / R`, when it is
     /// one (a configuration may give no canopy larger than the disc).
-    pub(super) fn disc_share(&self) -> Option<f64> {
+    fn disc_share(&self) -> Option<f64> {
         let ratio = self.drogue.inner_radius_m / self.drogue.canopy_radius_m;
         (ratio.is_finite() && ratio > 0.0 && ratio < 1.0).then_some(ratio)
     }
