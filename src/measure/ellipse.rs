@@ -70,6 +70,18 @@ impl Ellipse {
         }
     }
 
+    /// The concentric ellipse `factor` times this one's size, same
+    /// orientation (the disc inside its canopy rim, or the rim around it).
+    pub fn scaled(&self, factor: f64) -> Self {
+        Self::new(
+            self.cx,
+            self.cy,
+            factor * self.a,
+            factor * self.b,
+            self.theta,
+        )
+    }
+
     /// Whether the point `(u, v)` lies inside the ellipse or on it (`false`
     /// for a point or an ellipse that is not finite).
     pub fn contains(&self, u: f64, v: f64) -> bool {

@@ -124,7 +124,7 @@ impl DrogueCircles {
     /// with, not a measurement (the pose's prediction is [`ring_support`]'s).
     pub fn canopy_rim_around(&self, disc: &Ellipse) -> Ellipse {
         let ratio = self.canopy_radius_m / self.inner_radius_m;
-        Ellipse::new(disc.cx, disc.cy, ratio * disc.a, ratio * disc.b, disc.theta)
+        disc.scaled(ratio)
     }
 }
 

@@ -740,13 +740,7 @@ impl Detector {
         outer: &Ellipse,
     ) -> Option<Verified> {
         let ratio = self.disc_share()?;
-        let predicted = Ellipse::new(
-            outer.cx,
-            outer.cy,
-            outer.a * ratio,
-            outer.b * ratio,
-            outer.theta,
-        );
+        let predicted = outer.scaled(ratio);
         if !self.plausible(&predicted, 1.0) {
             return None;
         }
@@ -801,7 +795,7 @@ impl Detector {
         // holds the disc's own step, where the wide pass's strongest rise
         // can be the outline of the probe over the disc (nearer, so darker
         // under haze than the disc is).
-        let predicted = Ellipse::new(e.cx, e.cy, e.a * ratio, e.b * ratio, e.theta);
+        let predicted = e.scaled(ratio);
         let narrow = self.verify_as_scout(image, &predicted);
         if let Err(why) = &narrow {
             tracing::debug!(?why, "no inner disc where predicted: the wide pass");
