@@ -222,22 +222,30 @@ fn robustness_sweep_meets_its_limits() {
 /// seed 7 (a 71x36 px disc cut in two by a glare streak, the probe's end
 /// over it), four corners and the probe took the budget of
 /// `max_candidates` regions, largest first, and neither half of the disc
-/// was tried; the edge source's circles missed it too. The first regions
-/// without a rim now give their places to the next ones, once.
+/// was tried; the edge source's circles missed it too. The regions
+/// without a rim now give their places to the next ones. In frame 5 of
+/// seed 29 (a 28x26 px disc at 8.2 m in haze 0.48, vignette 0.36) two more
+/// corners took the places that one refund gave back: the refunds go on
+/// batch after batch.
 #[test]
 fn regions_without_a_rim_leave_the_budget_to_the_disc() {
     let levels = standard_levels();
     let everything = levels.iter().find(|l| l.label() == "everything").unwrap();
-    let (m, truth) = sweep::measure_one(7, everything, 19);
-    let truth = truth.expect("a drogue frame").ellipse;
-    let found = m.detection.expect("the disc is detected").ellipse_px;
-    let centre = (found.cx - truth.cx).hypot(found.cy - truth.cy);
-    assert!(
-        centre < 0.2
-            && (found.a / truth.a - 1.0).abs() < 0.01
-            && (found.b / truth.b - 1.0).abs() < 0.01,
-        "{found:?} for {truth:?}"
-    );
+    for (seed, index, centre_px, axis_share) in [(7, 19, 0.2, 0.01), (29, 5, 0.5, 0.025)] {
+        let (m, truth) = sweep::measure_one(seed, everything, index);
+        let truth = truth.expect("a drogue frame").ellipse;
+        let found = m
+            .detection
+            .unwrap_or_else(|| panic!("seed {seed} frame {index}: the disc is not detected"))
+            .ellipse_px;
+        let centre = (found.cx - truth.cx).hypot(found.cy - truth.cy);
+        assert!(
+            centre < centre_px
+                && (found.a / truth.a - 1.0).abs() < axis_share
+                && (found.b / truth.b - 1.0).abs() < axis_share,
+            "seed {seed} frame {index}: {found:?} for {truth:?}"
+        );
+    }
 }
 
 /// A glare streak across the disc whose core over it stays below

@@ -303,13 +303,12 @@ impl Detector {
         // each threshold. The first regions whose rays find no step at all
         // (a vignetted corner, a cloud's soft shadow: every seed `NoRim`)
         // are no candidates: they give their places to the next regions in
-        // size order, once (below), so that such regions cannot use up the
+        // size order (below), so that such regions cannot use up the
         // budget before a disc (or the part of it a glare streak leaves) is
         // tried.
         let mut kept: Vec<Blob> = Vec::new();
         let mut regions = 0usize;
         let (mut from, mut budget, mut offset) = (0, self.cfg.max_candidates as usize, 0);
-        let mut refunded = false;
         'batches: while budget > 0 {
             let (selected, next) = select_regions(&blobs, from, budget);
             if selected.is_empty() {
@@ -379,16 +378,12 @@ impl Detector {
                 }
             }
             offset += selected.len();
-            // The places of the first regions without a rim go to the next
-            // regions once: a chain of refunds would try every dark region
-            // of the frame, and each region tried is another chance for a
-            // wrong candidate.
-            budget = if refunded {
-                0
-            } else {
-                batch.len() - with_rim.len()
-            };
-            refunded = true;
+            // The places of the regions without a rim go to the next
+            // regions, batch after batch: a region whose rays meet no step
+            // is no chance of a wrong candidate, and the regions with a rim
+            // stay within `max_candidates` (each batch is as large as the
+            // last one's regions without a rim).
+            budget = batch.len() - with_rim.len();
         }
         self.blobs = blobs;
         regions
