@@ -225,9 +225,9 @@ fn robustness_sweep_meets_its_limits() {
 /// was tried; the edge source's circles missed it too. The regions
 /// without a rim now give their places to the next ones. In frame 5 of
 /// seed 29 (a 28x26 px disc at 8.2 m in haze 0.48, vignette 0.36) the
-/// places one refund gave back went to the hose, the probe and a fifth
-/// corner, whose place was not given back again: the refunds go on batch
-/// after batch.
+/// places one refund gave back went to two dark regions beside the disc
+/// (its hose and probe, by where they lie) and a fifth corner, whose place
+/// was not given back again: the refunds go on batch after batch.
 #[test]
 fn regions_without_a_rim_leave_the_budget_to_the_disc() {
     let levels = standard_levels();
