@@ -568,13 +568,29 @@ impl Detector {
             ) {
                 Ok(full) => Some(full),
                 Err(why) => {
+                    // The settling passes can walk off a blurred or
+                    // occluded disc onto the probe's or a streak's edges
+                    // (or run into the widest window by the luck of where
+                    // their rays fall). One full-density pass where the
+                    // sparse rim settled still holds the candidate when its
+                    // canopy shows beyond the doubt of its reading.
+                    let once =
+                        self.verify_unsettled(image, &scouted.ellipse, verify_spacing, max_points);
+                    let held = once.ok().filter(|v| {
+                        v.canopy.is_some_and(|c| {
+                            canopy::shown_beyond_doubt(c, self.cfg.min_canopy_fraction)
+                        })
+                    });
                     tracing::debug!(
                         centre_px = ?[scouted.ellipse.cx.round(), scouted.ellipse.cy.round()],
                         ?why,
-                        "the full-density rim pass failed: not the drogue"
+                        held_by_one_pass = held.is_some(),
+                        "the full-density rim pass failed"
                     );
-                    first_failure.get_or_insert(why);
-                    None
+                    if held.is_none() {
+                        first_failure.get_or_insert(why);
+                    }
+                    held
                 }
             }
         });

@@ -516,6 +516,21 @@ impl Detector {
         self.score(image, pass)
     }
 
+    /// One measuring pass about `start` (the sparse rim's settled
+    /// ellipse), scored as it comes, without passes walking on from it:
+    /// the full-density check's second look when its settling passes fail
+    /// (`Detector::search_full`).
+    pub(super) fn verify_unsettled(
+        &mut self,
+        image: &GrayImage,
+        start: &Ellipse,
+        spacing_px: f64,
+        max_points: u32,
+    ) -> Result<Verified, Reject> {
+        let pass = self.rim_pass(image, start, spacing_px, max_points, RimUse::Measure, 1.0)?;
+        self.score(image, pass)
+    }
+
     /// [`Self::verify_settled`] at a tracked frame's predicted ellipse,
     /// which verifies and measures in one pass: settled once it moves by a
     /// quarter of its narrowest window or less ([`SETTLED_WINDOW_SHARE`]).
