@@ -300,7 +300,7 @@ impl Detector {
                 .then(y.area.cmp(&x.area))
         });
         // The budget: the regions, and within each its largest part at
-        // each threshold. The first regions whose rays find no step at all
+        // each threshold. The regions whose rays find no step at all
         // (a vignetted corner, a cloud's soft shadow: every seed `NoRim`)
         // are no candidates: they give their places to the next regions in
         // size order (below), so that such regions cannot use up the
