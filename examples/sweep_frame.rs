@@ -8,7 +8,8 @@
 //! `cargo run --release --example sweep_frame -- SEED LEVEL INDEX [--crop DIR]`
 //!
 //! LEVEL is a level's label as the sweep's table and `SWEEP_TRACE=1` print
-//! it (`everything`, `glare streak 30 px wide`, `no drogue: crescent`).
+//! it (`everything`, `glare streak 30 px wide`, `glare glow sigma 135 px`,
+//! `no drogue: crescent`).
 //! `RUST_LOG=drogue_vision::measure::detect=debug` adds the detector's line
 //! per candidate (where it was, what kind of seed, why it was dropped), and
 //! `=trace` each rim pass; the line `truth in the frame` gives the disc's
@@ -61,7 +62,7 @@ fn main() {
     let s = &frame.settings;
     println!(
         "drawn with: range {:.2} m, tilt {:.0} deg, gain {:.2}, read noise {:.1} DN, vignette {:.2}, \
-         haze {:.2}, blur {:.1} px, glare streak {}, probe {}, distractors {}{}, throat shadow {:.2}, lens k1 {:.2}",
+         haze {:.2}, blur {:.1} px, glare streak {}, glare glow {}, probe {}, distractors {}{}, throat shadow {:.2}, lens k1 {:.2}",
         s.range_m,
         s.tilt_deg,
         s.gain,
@@ -71,6 +72,8 @@ fn main() {
         s.blur_px,
         s.glare_width_px
             .map_or("none".into(), |w| format!("{w:.0} px wide")),
+        s.glare_glow_sigma_px
+            .map_or("none".into(), |w| format!("sigma {w:.0} px")),
         s.probe_bin.map_or("none".into(), |(lo, hi)| format!(
             "over {:.0}-{:.0} % of the rim",
             100.0 * lo,

@@ -48,7 +48,7 @@ mod sensor;
 mod sky;
 mod tube;
 
-pub use scene::{Decal, DecalShape, DrogueView, FrameScene, GlareStreak, Look, Tube};
+pub use scene::{Decal, DecalShape, DrogueView, FrameScene, GlareGlow, GlareStreak, Look, Tube};
 use sensor::{bounded_blur, inv_normal};
 use sky::sky_row;
 use tube::TubeLayer;
@@ -251,14 +251,7 @@ impl Renderer {
         }
         self.composite_tube(&mut rad, &probe_layer, bbox.map(|b| (&scene.drogue, b)));
         // 3. Sensor: vignette, glare veil, gain, noise, 8 bits.
-        let img = self.sensor(
-            &mut rad,
-            &dirty,
-            &sky_grid,
-            &veil_grid,
-            scene.glare_streak.as_ref(),
-            scene.noise_seed,
-        );
+        let img = self.sensor(&mut rad, &dirty, &sky_grid, &veil_grid, scene);
         self.rad = rad;
         self.hose_layer = hose_layer;
         self.probe_layer = probe_layer;

@@ -259,6 +259,7 @@ impl Simulator {
             without_drogue: false,
             decals: Vec::new(),
             glare_streak: None,
+            glare_glow: None,
         };
         let truth = self.truth(st, &scene, &hose, &probe);
         (scene, truth)

@@ -17,7 +17,7 @@
 use crate::TruthEllipse;
 use crate::camera::SimCamera;
 use crate::geometry::{V3, r_body_cam};
-use crate::render::{FrameScene, GlareStreak, Look, Renderer};
+use crate::render::{FrameScene, GlareGlow, GlareStreak, Look, Renderer};
 use image::GrayImage;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -44,6 +44,11 @@ const MAX_THROAT_SHADE: f64 = 0.3;
 /// Range of the throat shadow's e-folding width, metres: an eighth to a
 /// third of the inner radius, from a tight shadow line to a soft one.
 const THROAT_SHADE_WIDTH_M: (f64, f64) = (0.02, 0.05);
+
+/// Most radiance a glare glow adds at the disc's nearest rim: the disc
+/// (radiance about 0.1) stays below saturation, a darker shape beside the
+/// light however strong the glow.
+const MAX_GLOW_AT_RIM: f64 = 0.7;
 
 /// Salt of the throat shadow's random stream.
 const THROAT_STREAM: u64 = 0x7468_726f_6174;
@@ -92,9 +97,12 @@ pub enum Factor {
     /// Dark stars and flowers around the drogue (value: how many).
     StarDistractors,
     /// The canopy darkened toward the disc by the throat's shadow (value:
-    /// the share of its radiance lost at the disc's edge). Last: a level's
-    /// frames are seeded from its factor's place in this list.
+    /// the share of its radiance lost at the disc's edge).
     ThroatShadow,
+    /// The glow about the sun's image near the disc, with a faint streak
+    /// through it (value: the glow's standard deviation, pixels). Last: a
+    /// level's frames are seeded from its factor's place in this list.
+    GlareGlow,
 }
 
 impl Factor {
@@ -104,6 +112,7 @@ impl Factor {
             Factor::Baseline => "baseline",
             Factor::Haze => "haze",
             Factor::Glare => "glare streak",
+            Factor::GlareGlow => "glare glow",
             Factor::Blur => "motion blur",
             Factor::Noise => "noise",
             Factor::Exposure => "exposure",
@@ -158,6 +167,7 @@ impl Level {
         match self.factor {
             Factor::Haze => format!("{v:.1}"),
             Factor::Glare => format!("{v:.0} px wide"),
+            Factor::GlareGlow => format!("sigma {v:.0} px"),
             Factor::Blur => format!("{v:.0} px"),
             Factor::Noise => format!("sigma {v:.0}"),
             Factor::Exposure => format!("gain {v:.1}"),
@@ -186,8 +196,8 @@ impl Level {
 pub fn standard_levels() -> Vec<Level> {
     use Factor::{
         Baseline, Blur, CanopylessDisc, Crescent, DarkRing, DarkShapes, DarkStars, Distortion,
-        Distractors, Everything, Exposure, Glare, Haze, Noise, Occlusion, Range, StarDistractors,
-        ThroatShadow, Tilt, Vignetting,
+        Distractors, Everything, Exposure, Glare, GlareGlow, Haze, Noise, Occlusion, Range,
+        StarDistractors, ThroatShadow, Tilt, Vignetting,
     };
     let mut levels = vec![Level::new(Baseline, 0.0)];
     let mut add = |f: Factor, values: &[f64]| {
@@ -195,6 +205,7 @@ pub fn standard_levels() -> Vec<Level> {
     };
     add(Haze, &[0.2, 0.4, 0.6]);
     add(Glare, &[4.0, 12.0, 30.0]);
+    add(GlareGlow, &[30.0, 70.0, 135.0]);
     add(Blur, &[4.0, 8.0, 16.0, 32.0]);
     add(Noise, &[2.0, 5.0, 10.0, 20.0]);
     add(Exposure, &[0.4, 0.7, 1.3]);
@@ -310,6 +321,8 @@ pub struct Settings {
     pub blur_px: f64,
     /// Width of a glare streak over the disc, pixels, if any.
     pub glare_width_px: Option<f64>,
+    /// Standard deviation of a glare glow near the disc, pixels, if any.
+    pub glare_glow_sigma_px: Option<f64>,
     /// Share of the rim the probe may hide (low, high), if a probe.
     pub probe_bin: Option<(f64, f64)>,
     /// Dark distractor shapes.
@@ -421,6 +434,7 @@ impl Sweep {
             without_drogue: true,
             decals: Vec::new(),
             glare_streak: None,
+            glare_glow: None,
         };
         let mut truth = None;
         if level.factor.has_drogue() {
@@ -441,6 +455,10 @@ impl Sweep {
                     width_px,
                     strength: rng.random_range(1.0..1.6),
                 });
+            }
+            if let Some(sigma_px) = s.glare_glow_sigma_px {
+                (scene.glare_glow, scene.glare_streak) =
+                    glow_near(centre_px, t.ellipse.a, sigma_px, &mut rng);
             }
             let phi = rng.random_range(0.0..TAU);
             scene.blur_px = [s.blur_px * phi.cos(), s.blur_px * phi.sin()];
@@ -473,6 +491,41 @@ impl Sweep {
     }
 }
 
+/// A glare glow of `sigma_px` whose centre lies half to two and a half
+/// standard deviations beyond the rim of the disc (centre `centre_px`,
+/// major semi-axis `a_px`), in any direction, and the faint streak through
+/// it that a lens's flare draws (a tenth to a quarter of the scene's
+/// radiance, a quarter to one standard deviation wide). The glow lightens
+/// the disc more on one side than the other and saturates the canopy
+/// about it when strong; its strength (0.4-1.2) is held to at most 0.7 at
+/// the disc's nearest rim, so that the disc itself never saturates: a
+/// person still sees it, a darker shape on the light.
+fn glow_near(
+    centre_px: [f64; 2],
+    a_px: f64,
+    sigma_px: f64,
+    rng: &mut ChaCha8Rng,
+) -> (Option<GlareGlow>, Option<GlareStreak>) {
+    let (bearing, beyond) = (rng.random_range(0.0..TAU), rng.random_range(0.5..2.5));
+    let apart = a_px + beyond * sigma_px;
+    let at_rim_cap = MAX_GLOW_AT_RIM * (0.5 * beyond * beyond).exp();
+    let glow = GlareGlow {
+        centre_px: [
+            centre_px[0] + apart * bearing.cos(),
+            centre_px[1] + apart * bearing.sin(),
+        ],
+        sigma_px,
+        strength: rng.random_range(0.4..1.2f64).min(at_rim_cap),
+    };
+    let streak = GlareStreak {
+        through_px: glow.centre_px,
+        angle_rad: rng.random_range(0.0..PI),
+        width_px: rng.random_range(0.25..1.0) * sigma_px,
+        strength: rng.random_range(0.1..0.25),
+    };
+    (Some(glow), Some(streak))
+}
+
 /// The baseline, with the level's factor applied.
 fn settings(level: &Level, rng: &mut ChaCha8Rng) -> Settings {
     let mut s = Settings {
@@ -484,6 +537,7 @@ fn settings(level: &Level, rng: &mut ChaCha8Rng) -> Settings {
         haze: 0.0,
         blur_px: 0.0,
         glare_width_px: None,
+        glare_glow_sigma_px: None,
         probe_bin: None,
         distractors: 0,
         star_distractors: false,
@@ -495,6 +549,7 @@ fn settings(level: &Level, rng: &mut ChaCha8Rng) -> Settings {
     match level.factor {
         Factor::Haze => s.haze = v,
         Factor::Glare => s.glare_width_px = Some(v),
+        Factor::GlareGlow => s.glare_glow_sigma_px = Some(v),
         Factor::Blur => s.blur_px = v,
         Factor::Noise => s.read_noise_dn = v,
         Factor::Exposure => s.gain = v,

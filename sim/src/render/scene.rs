@@ -136,6 +136,8 @@ pub struct FrameScene {
     pub decals: Vec<Decal>,
     /// A sun-glare streak; `None` by default.
     pub glare_streak: Option<GlareStreak>,
+    /// The glow about the sun's image; `None` by default.
+    pub glare_glow: Option<GlareGlow>,
 }
 
 /// Outline of a [`Decal`] in its plane, metres.
@@ -300,6 +302,21 @@ pub struct GlareStreak {
     /// Full width at half maximum, pixels (> 0).
     pub width_px: f64,
     /// Radiance added on the centre line (relative, like the scene's).
+    pub strength: f64,
+}
+
+/// The glow about the sun's image (veiling glare): light added at the
+/// sensor (after vignetting, before noise), Gaussian about `centre_px`
+/// with standard deviation `sigma_px`, over whatever lies there. With a
+/// `strength` above the scene's radiance headroom its core saturates, and
+/// it lightens a disc and its canopy alike: a veil, not an edge.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct GlareGlow {
+    /// The glow's centre, pixels (it may lie off the frame).
+    pub centre_px: [f64; 2],
+    /// Its standard deviation, pixels (> 0).
+    pub sigma_px: f64,
+    /// Radiance added at its centre (relative, like the scene's).
     pub strength: f64,
 }
 

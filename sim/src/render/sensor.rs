@@ -3,7 +3,7 @@
 //! sensor loop is branch-free so it vectorises.
 
 use super::sky::{add_lerp_columns, sky_row};
-use super::{GRID, GlareStreak, PixelBox, Renderer};
+use super::{FrameScene, GRID, GlareGlow, GlareStreak, PixelBox, Renderer};
 use image::GrayImage;
 
 /// Inverse normal CDF (Acklam's rational approximation, |error| < 1.2e-9).
@@ -83,6 +83,38 @@ pub(super) fn add_streak(row: &mut [f32], v: usize, s: &GlareStreak, gain: f32) 
     for (k, r) in row[first..=hi as usize].iter_mut().enumerate() {
         let d = (a * (first + k) as f64 + b) / sigma;
         *r += (s.strength * (-0.5 * d * d).exp()) as f32 * gain;
+    }
+}
+
+/// Adds the glare glow's light to image row `v` (gain applied), out to
+/// four standard deviations from its centre.
+pub(super) fn add_glow(row: &mut [f32], v: usize, g: &GlareGlow, gain: f32) {
+    let finite = [g.centre_px[0], g.centre_px[1], g.strength]
+        .iter()
+        .all(|x| x.is_finite());
+    if !(finite && g.sigma_px > 0.0 && g.sigma_px.is_finite()) {
+        return;
+    }
+    let reach = 4.0 * g.sigma_px;
+    let dv = v as f64 - g.centre_px[1];
+    if dv.abs() > reach {
+        return;
+    }
+    let half = (reach * reach - dv * dv).sqrt();
+    let last = row.len().saturating_sub(1) as f64;
+    let (lo, hi) = (
+        (g.centre_px[0] - half).max(0.0).ceil(),
+        (g.centre_px[0] + half).min(last).floor(),
+    );
+    if lo > hi {
+        return;
+    }
+    let first = lo as usize;
+    let inv = 1.0 / (2.0 * g.sigma_px * g.sigma_px);
+    let across = g.strength * (-dv * dv * inv).exp();
+    for (k, r) in row[first..=hi as usize].iter_mut().enumerate() {
+        let du = (first + k) as f64 - g.centre_px[0];
+        *r += (across * (-du * du * inv).exp()) as f32 * gain;
     }
 }
 
@@ -194,9 +226,13 @@ impl Renderer {
         dirty: &[bool],
         sky_grid: &[f32],
         veil_grid: &[f32],
-        streak: Option<&GlareStreak>,
-        seed: u64,
+        scene: &FrameScene,
     ) -> GrayImage {
+        let (streak, glow, seed) = (
+            scene.glare_streak.as_ref(),
+            scene.glare_glow.as_ref(),
+            scene.noise_seed,
+        );
         let (w, h) = (self.w, self.h);
         let l = &self.look;
         let gain = (255.0 * l.gain) as f32;
@@ -243,6 +279,9 @@ impl Renderer {
             }
             if let Some(s) = streak {
                 add_streak(row, v, s, gain);
+            }
+            if let Some(g) = glow {
+                add_glow(row, v, g, gain);
             }
             let dst = &mut out[v * w..(v + 1) * w];
             if noisy {

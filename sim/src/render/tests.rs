@@ -554,6 +554,41 @@ fn glare_streak_saturates_its_line_only() {
     assert_eq!(r.render(&scene), before);
 }
 
+/// The glare glow adds `255 gain strength exp(-d^2 / 2 sigma^2)` digital
+/// numbers at a distance `d` from its centre (to a level's rounding), out to
+/// four standard deviations: its strong core saturates, pixels beyond are
+/// as they were; a scene without it renders as before.
+#[test]
+fn glare_glow_adds_its_gaussian_out_to_four_sigmas() {
+    let (_, mut scene, mut r) = plain("approach");
+    let before = r.render(&scene);
+    let (centre, sigma, strength) = ([600.0, 400.0], 40.0, 1.5);
+    scene.glare_glow = Some(GlareGlow {
+        centre_px: centre,
+        sigma_px: sigma,
+        strength,
+    });
+    let img = r.render(&scene);
+    for (u, v, p) in img.enumerate_pixels() {
+        let d = (u as f64 - centre[0]).hypot(v as f64 - centre[1]);
+        let was = f64::from(before.get_pixel(u, v)[0]);
+        let added = 255.0 * strength * (-0.5 * (d / sigma).powi(2)).exp();
+        if d < 1.0 {
+            assert_eq!(p[0], 255, "({u}, {v}) at the centre");
+        } else if d > 4.0 * sigma + 1.0 {
+            assert_eq!(f64::from(p[0]), was, "({u}, {v}) {d:.1} px off");
+        } else if d < 4.0 * sigma - 1.0 && was + added < 254.0 {
+            let got = f64::from(p[0]) - was;
+            assert!(
+                (got - added).abs() <= 1.0,
+                "({u}, {v}) {d:.1} px off: +{got} for +{added:.2}"
+            );
+        }
+    }
+    scene.glare_glow = None;
+    assert_eq!(r.render(&scene), before);
+}
+
 /// Without the drogue the frame is the sky: the same as a drogue far out
 /// of view.
 #[test]
