@@ -511,6 +511,24 @@ fn one_full_density_pass_holds_a_candidate_whose_settling_passes_walk_off() {
     assert!(wrong.is_empty(), "{wrong:#?}");
 }
 
+/// A glare's glow beside the disc saturates the canopy around it: the
+/// disc, lightened to a mid grey, is darker than no global threshold
+/// separates, and every step of its rim runs straight into saturated
+/// pixels, which the edge source takes for the glare's own skirt. The
+/// local-contrast source, tried on frames where a glare saturates part of
+/// the frame, finds it as darker than its neighbourhood. These frames were
+/// not detected without it (`implausible`, the last candidate tried being
+/// elsewhere); each must be the disc.
+#[test]
+fn a_disc_on_a_canopy_a_glow_saturated_is_found_by_its_local_contrast() {
+    let mut wrong = frames_not_the_disc("glare glow sigma 135 px", &[(1, 6, true), (14, 28, true)]);
+    wrong.extend(frames_not_the_disc(
+        "glare glow sigma 70 px",
+        &[(1, 28, true)],
+    ));
+    assert!(wrong.is_empty(), "{wrong:#?}");
+}
+
 /// Clear drogues in noise (`everything`: read noise 2-8 DN, haze): the
 /// canopy test's polarity-free edge took the drogue's end at the outermost
 /// box mean off the sky's level by `min_contrast_gray`, and in noise a

@@ -300,7 +300,7 @@ impl EdgeVoter {
             i32::MAX
         };
         self.edges.clear();
-        let any_glare = img.pixels.iter().any(|&p| p >= SATURATED_LEVEL);
+        let any_glare = img.any_at_least(SATURATED_LEVEL);
         let (mut gx_row, mut gy_row, mut m2_row) = (vec![0i32; w], vec![0i32; w], vec![0i32; w]);
         for y in 1..h - 1 {
             // The three rows, each cut to the window's columns: no bounds

@@ -102,10 +102,9 @@ pub struct DetectConfig {
     /// Seed of the random sampling (the detection is deterministic).
     pub seed: u64,
     /// Whether the local-contrast source runs when the dark regions and the
-    /// edges gave no clear drogue (off by default: on the reference frames
-    /// it finds no disc the other sources miss, and its seeds inside a disc
-    /// under the probe's tip can verify the tip; see the README's
-    /// "Detection").
+    /// edges gave no clear drogue and a glare saturates part of the frame
+    /// (a disc on a canopy that a glare's glow saturated is darker than
+    /// its neighbourhood only; see the README's "Detection").
     #[serde(default)]
     pub local_contrast_source: bool,
 }

@@ -5,7 +5,7 @@
 use super::canopy;
 use super::coarse::{self, Blob};
 use super::edges::EdgeCircle;
-use super::{Detector, Reject, Verified};
+use super::{Detector, Reject, SATURATED_LEVEL, Verified};
 use crate::measure::ellipse::Ellipse;
 use image::GrayImage;
 
@@ -245,10 +245,17 @@ impl Detector {
         if !any_accepted(&verified, accept) {
             self.try_edge_source(image, accept, &mut tried, &mut verified);
         }
-        // The third source, when neither gave a clear drogue: dark regions
-        // relative to their own neighbourhood (a disc that haze, vignetting
-        // or a glare's halo lifted above every global threshold).
-        if self.cfg.local_contrast_source && !any_accepted(&verified, accept) {
+        // The third source, when neither gave a clear drogue and a glare
+        // saturates part of the frame: dark regions relative to their own
+        // neighbourhood (a disc that a glare's glow lifted above every
+        // global threshold, its rim's steps running into the saturated
+        // canopy, which the edge source takes for the glare's skirt).
+        // Without a glare it is not tried: on drogue-free frames it was
+        // most of the search's cost and found nothing.
+        if self.cfg.local_contrast_source
+            && !any_accepted(&verified, accept)
+            && self.decimated.any_at_least(SATURATED_LEVEL)
+        {
             self.try_local_contrast(image, accept, &mut tried, &mut verified);
         }
         tracing::debug!(
@@ -533,6 +540,28 @@ impl Detector {
         }
     }
 
+    /// Whether a block of the decimated frame within the canopy's reach of
+    /// region `b` (its centre, `R / r` times its major semi-axis and two
+    /// blocks more each way) averages `SATURATED_LEVEL` or more.
+    fn glare_within_canopy(&self, b: &Blob) -> bool {
+        let dec = &self.decimated;
+        let f = dec.factor.max(1) as f64;
+        let ratio = self.disc_share().map_or(1.0, |share| 1.0 / share);
+        let reach = ratio * b.a_px / f + 2.0;
+        let (cx, cy) = (b.centre_px[0] / f, b.centre_px[1] / f);
+        let span = |c: f64, n: usize| {
+            let lo = (c - reach).floor().max(0.0) as usize;
+            let hi = ((c + reach).ceil().max(0.0) as usize).min(n);
+            lo..hi
+        };
+        let (xs, ys) = (span(cx, dec.width), span(cy, dec.height));
+        ys.into_iter().any(|y| {
+            dec.pixels[y * dec.width..][xs.clone()]
+                .iter()
+                .any(|&p| p >= SATURATED_LEVEL)
+        })
+    }
+
     /// The disc's size as a share of the canopy rim's, `r / R`, when it is
     /// one (a configuration may give no canopy larger than the disc).
     fn disc_share(&self) -> Option<f64> {
@@ -614,7 +643,21 @@ impl Detector {
             }
         }
         self.blobs = blobs;
-        regions.sort_by(|x, y| y.0.cmp(&x.0).then(y.1.area.cmp(&x.1.area)));
+        // The disc this source is for lies in a glare's glow, its canopy
+        // saturated: the regions with a saturated block within their
+        // canopy's reach first (the sky beyond the glow makes larger dark
+        // patches), then whole and round ones, then larger ones.
+        let beside_glare: Vec<bool> = regions
+            .iter()
+            .map(|(_, b)| self.glare_within_canopy(b))
+            .collect();
+        let mut order: Vec<usize> = (0..regions.len()).collect();
+        order.sort_by(|&i, &j| {
+            (beside_glare[j].cmp(&beside_glare[i]))
+                .then(regions[j].0.cmp(&regions[i].0))
+                .then(regions[j].1.area.cmp(&regions[i].1.area))
+        });
+        let regions: Vec<(bool, Blob)> = order.into_iter().map(|i| regions[i].clone()).collect();
         let mut taken: Vec<&Blob> = Vec::new();
         'regions: for (i, (round, b)) in regions.iter().enumerate() {
             if taken.len() >= LOCAL_REGIONS {

@@ -823,20 +823,62 @@ fn the_local_contrast_source_finds_a_disc_above_every_global_threshold() {
     );
 }
 
-/// The local-contrast source is off by default, and a detector with it on
-/// finds nothing on the drogue-free frames of the dark-shapes test.
+/// The local-contrast source is on by default, and it finds nothing on the
+/// drogue-free frames of the dark-shapes test with a saturated patch (a
+/// glare) beside the shapes, where it is tried.
 #[test]
-fn the_local_contrast_source_is_off_by_default_and_finds_no_dark_shape() {
-    assert!(!Config::embedded().detect.local_contrast_source);
+fn the_local_contrast_source_is_on_by_default_and_finds_no_dark_shape() {
+    assert!(Config::embedded().detect.local_contrast_source);
     let (w, h) = (400, 300);
     let cam = camera(w, h);
     let mut scene = Scene::new(Ellipse::new(0.0, 0.0, 0.0, 0.0, 0.0));
     scene.with_canopy = false;
     scene.rects = vec![[40.0, 40.0, 160.0, 80.0], [250.0, 150.0, 290.0, 190.0]];
+    scene.patches = vec![([300.0, 20.0, 380.0, 100.0], 255.0)];
     let img = scene.render(w, h, 2.0, 4);
     let mut det = detector(&cam);
-    det.cfg.local_contrast_source = true;
+    det.decimated.update(&img, det.cfg.decimation as usize);
+    assert!(
+        det.decimated.any_at_least(super::SATURATED_LEVEL),
+        "the patch saturates no block: the local source would not be tried"
+    );
     assert!(det.detect(&img, None).is_none());
+}
+
+/// A glare's glow that saturates the canopy around a disc lightened to a
+/// mid grey (the sweep's `glare glow` levels): the sky is darker than the
+/// disc, so no global threshold separates it, and every step of its rim
+/// runs straight into saturated pixels, which the edge source takes for
+/// the glare's skirt. Only the local-contrast source, tried because the
+/// frame has a glare, finds it: within half a pixel with the source, not
+/// at all without it.
+#[test]
+fn the_local_contrast_source_finds_a_disc_on_a_saturated_canopy() {
+    let (w, h) = (480, 360);
+    let cam = camera(w, h);
+    let disc = Ellipse::new(240.0, 170.0, 26.0, 22.0, 0.3);
+    let mut scene = Scene::new(disc);
+    (scene.disc_level, scene.canopy_level, scene.band_level) = (185.0, 255.0, 235.0);
+    scene.sky_level = 150.0;
+    let img = scene.render(w, h, 2.0, 5);
+    let mut det = detector(&cam);
+    assert!(det.cfg.local_contrast_source);
+    let found = det
+        .detect(&img, None)
+        .expect("the disc, by its local contrast");
+    let e = found.ellipse_px;
+    assert!(
+        (e.cx - disc.cx).hypot(e.cy - disc.cy) < 0.5
+            && (e.a - disc.a).abs() < 0.5
+            && (e.b - disc.b).abs() < 0.5,
+        "{e:?}"
+    );
+    let mut without = detector(&cam);
+    without.cfg.local_contrast_source = false;
+    assert!(
+        without.detect(&img, None).is_none(),
+        "found without the local source: the test shows nothing"
+    );
 }
 
 /// A blur nearly as long as the disc's radius: 32 and 40 px across a

@@ -15,6 +15,15 @@ pub struct Decimated {
 }
 
 impl Decimated {
+    /// Whether any block averages `level` or more: a whole block that
+    /// bright is a saturated area (a glare), where a single specular pixel
+    /// averages out.
+    pub fn any_at_least(&self, level: u8) -> bool {
+        // The largest block, not the first one at `level`: a scan without
+        // an early exit that the compiler vectorises.
+        self.pixels.iter().fold(0u8, |m, &p| m.max(p)) >= level
+    }
+
     /// Averages `factor` x `factor` blocks (partial blocks at the right and
     /// bottom edges are dropped).
     #[inline(never)]
