@@ -47,7 +47,8 @@ const THROAT_SHADE_WIDTH_M: (f64, f64) = (0.02, 0.05);
 
 /// Most radiance a glare glow adds at the disc's nearest rim: the disc
 /// (radiance about 0.1) stays below saturation, a darker shape beside the
-/// light however strong the glow.
+/// light however strong the glow (but where the glow's faint streak
+/// crosses it close to the glow).
 const MAX_GLOW_AT_RIM: f64 = 0.7;
 
 /// Salt of the throat shadow's random stream.
@@ -498,7 +499,8 @@ impl Sweep {
 /// radiance, a quarter to one standard deviation wide). The glow lightens
 /// the disc more on one side than the other and saturates the canopy
 /// about it when strong; its strength (0.4-1.2) is held to at most 0.7 at
-/// the disc's nearest rim, so that the disc itself never saturates: a
+/// the disc's nearest rim, so that the disc stays below saturation (but
+/// where the streak, up to 0.25 more, crosses it close to the glow): a
 /// person still sees it, a darker shape on the light.
 fn glow_near(
     centre_px: [f64; 2],

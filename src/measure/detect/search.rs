@@ -8,6 +8,7 @@ use super::edges::EdgeCircle;
 use super::{Detector, Reject, SATURATED_LEVEL, Verified};
 use crate::measure::ellipse::Ellipse;
 use image::GrayImage;
+use std::cmp::Reverse;
 
 /// Wide-pass reach of seeds whose radius is not a rim's (the deepest
 /// point's inscribed circle, the point ringed by light, an edge-voting
@@ -550,8 +551,8 @@ impl Detector {
         let reach = ratio * b.a_px / f + 2.0;
         let (cx, cy) = (b.centre_px[0] / f, b.centre_px[1] / f);
         let span = |c: f64, n: usize| {
-            let lo = (c - reach).floor().max(0.0) as usize;
             let hi = ((c + reach).ceil().max(0.0) as usize).min(n);
+            let lo = ((c - reach).floor().max(0.0) as usize).min(hi);
             lo..hi
         };
         let (xs, ys) = (span(cx, dec.width), span(cy, dec.height));
@@ -647,17 +648,9 @@ impl Detector {
         // saturated: the regions with a saturated block within their
         // canopy's reach first (the sky beyond the glow makes larger dark
         // patches), then whole and round ones, then larger ones.
-        let beside_glare: Vec<bool> = regions
-            .iter()
-            .map(|(_, b)| self.glare_within_canopy(b))
-            .collect();
-        let mut order: Vec<usize> = (0..regions.len()).collect();
-        order.sort_by(|&i, &j| {
-            (beside_glare[j].cmp(&beside_glare[i]))
-                .then(regions[j].0.cmp(&regions[i].0))
-                .then(regions[j].1.area.cmp(&regions[i].1.area))
+        regions.sort_by_cached_key(|(round, b)| {
+            Reverse((self.glare_within_canopy(b), *round, b.area))
         });
-        let regions: Vec<(bool, Blob)> = order.into_iter().map(|i| regions[i].clone()).collect();
         let mut taken: Vec<&Blob> = Vec::new();
         'regions: for (i, (round, b)) in regions.iter().enumerate() {
             if taken.len() >= LOCAL_REGIONS {
