@@ -253,8 +253,12 @@ impl Detector {
         // canopy, which the edge source takes for the glare's skirt).
         // Without a glare it is not tried: on the drogue-free reference
         // frames it found nothing and added three fifths to the search.
+        // Nor where a candidate already shows its canopy rim beyond doubt:
+        // that is the drogue, and the disc this source is for is one that
+        // nothing else found.
         if self.cfg.local_contrast_source
             && !any_accepted(&verified, accept)
+            && !verified.iter().any(|v| self.canopy_shown(v))
             && self.decimated.any_at_least(SATURATED_LEVEL)
         {
             self.try_local_contrast(image, accept, &mut tried, &mut verified);
@@ -744,11 +748,7 @@ impl Detector {
     /// gives the rim. The canopy's rim is
     /// [`canopy::DrogueCircles::canopy_rim_around`] the candidate's ellipse.
     pub(super) fn within_shown_canopy(&self, candidate: &Verified, seed: &Seed) -> bool {
-        let needed = self.cfg.min_canopy_fraction;
-        if !candidate
-            .canopy
-            .is_some_and(|shown| canopy::shown_beyond_doubt(shown, needed))
-        {
+        if !self.canopy_shown(candidate) {
             return false;
         }
         // The seed's centre, undistorted pixels, as the ellipse is.
@@ -756,6 +756,16 @@ impl Detector {
         self.drogue
             .canopy_rim_around(&candidate.ellipse)
             .contains(u, v)
+    }
+
+    /// Whether `candidate` verified with its canopy rim shown beyond the
+    /// doubt of reading it ([`canopy::shown_beyond_doubt`] of
+    /// `min_canopy_fraction`).
+    pub(super) fn canopy_shown(&self, candidate: &Verified) -> bool {
+        let needed = self.cfg.min_canopy_fraction;
+        candidate
+            .canopy
+            .is_some_and(|shown| canopy::shown_beyond_doubt(shown, needed))
     }
 
     /// The disc inside `outer` (undistorted), a settled rim whose own

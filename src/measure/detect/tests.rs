@@ -881,6 +881,59 @@ fn the_local_contrast_source_finds_a_disc_on_a_saturated_canopy() {
     );
 }
 
+/// The local-contrast source is not tried where a candidate already shows
+/// its canopy rim beyond doubt: that candidate is the drogue. On the left a
+/// drogue whose canopy a patch of sky hides on one side (its share of the
+/// rim below what ends the search by itself), on the right the disc on a
+/// glare-saturated canopy that only the local source finds: alone, the
+/// right half gives the disc; beside the drogue it is not looked for.
+#[test]
+fn the_local_contrast_source_is_not_tried_beside_a_drogue_its_canopy_shows() {
+    let (w, h) = (960, 360);
+    let cam = camera(w, h);
+    // No score ends the search: only the canopy could.
+    let never = 2.0;
+    let drogue = Ellipse::new(200.0, 180.0, 40.0, 38.0, 0.0);
+    let mut hidden = Scene::new(drogue);
+    hidden.patches = vec![([250.0, 80.0, 300.0, 280.0], 136.0)];
+    let left = hidden.render(w, h, 2.0, 6);
+    let disc = Ellipse::new(720.0, 170.0, 26.0, 22.0, 0.3);
+    let mut glow = Scene::new(disc);
+    (glow.disc_level, glow.canopy_level, glow.band_level) = (185.0, 255.0, 235.0);
+    glow.sky_level = 150.0;
+    let right = glow.render(w, h, 2.0, 5);
+    let near = |v: &Verified, e: &Ellipse| (v.ellipse.cx - e.cx).hypot(v.ellipse.cy - e.cy) < 3.0;
+    let alone = detector(&cam).verify_candidates(&right, never);
+    assert!(
+        alone.iter().any(|v| near(v, &disc)),
+        "the local source did not find the disc alone: {:?}",
+        scores(&alone)
+    );
+    let both = GrayImage::from_fn(w, h, |x, y| {
+        if x < w / 2 {
+            *left.get_pixel(x, y)
+        } else {
+            *right.get_pixel(x, y)
+        }
+    });
+    let det = detector(&cam);
+    let verified = detector(&cam).verify_candidates(&both, never);
+    let shown = verified
+        .iter()
+        .find(|v| near(v, &drogue))
+        .expect("the drogue verified");
+    assert!(
+        det.canopy_shown(shown) && !shown.canopy.is_some_and(|c| c >= search::CANOPY_CONFIRMS),
+        "the drogue's canopy must be shown, not confirmed: {:?}",
+        shown.canopy
+    );
+    assert!(
+        !verified.iter().any(|v| near(v, &disc)),
+        "{:?}",
+        scores(&verified)
+    );
+}
+
 /// A blur nearly as long as the disc's radius: 32 and 40 px across a
 /// 35x32 px disc in noise of 2 gray levels, in three directions. Each
 /// blurred step rises about 4 gray levels a pixel, as little as the noise
