@@ -916,8 +916,8 @@ fn the_local_contrast_source_is_not_tried_beside_a_drogue_its_canopy_shows() {
             *right.get_pixel(x, y)
         }
     });
-    let det = detector(&cam);
-    let verified = detector(&cam).verify_candidates(&both, never);
+    let mut det = detector(&cam);
+    let verified = det.verify_candidates(&both, never);
     let shown = verified
         .iter()
         .find(|v| near(v, &drogue))
