@@ -845,6 +845,15 @@ fn the_local_contrast_source_is_on_by_default_and_finds_no_dark_shape() {
     assert!(det.detect(&img, None).is_none());
 }
 
+/// A drogue under a glare's glow: the disc lightened to a mid grey, its
+/// canopy saturated, the sky darker than the disc.
+fn glow_saturated_canopy(disc: Ellipse) -> Scene {
+    let mut scene = Scene::new(disc);
+    (scene.disc_level, scene.canopy_level, scene.band_level) = (185.0, 255.0, 235.0);
+    scene.sky_level = 150.0;
+    scene
+}
+
 /// A glare's glow that saturates the canopy around a disc lightened to a
 /// mid grey (the sweep's `glare glow` levels): the sky is darker than the
 /// disc, so no global threshold separates it, and every step of its rim
@@ -857,10 +866,7 @@ fn the_local_contrast_source_finds_a_disc_on_a_saturated_canopy() {
     let (w, h) = (480, 360);
     let cam = camera(w, h);
     let disc = Ellipse::new(240.0, 170.0, 26.0, 22.0, 0.3);
-    let mut scene = Scene::new(disc);
-    (scene.disc_level, scene.canopy_level, scene.band_level) = (185.0, 255.0, 235.0);
-    scene.sky_level = 150.0;
-    let img = scene.render(w, h, 2.0, 5);
+    let img = glow_saturated_canopy(disc).render(w, h, 2.0, 5);
     let mut det = detector(&cam);
     assert!(det.cfg.local_contrast_source);
     let found = det
@@ -898,10 +904,7 @@ fn the_local_contrast_source_is_not_tried_beside_a_drogue_its_canopy_shows() {
     hidden.patches = vec![([250.0, 80.0, 300.0, 280.0], 136.0)];
     let left = hidden.render(w, h, 2.0, 6);
     let disc = Ellipse::new(720.0, 170.0, 26.0, 22.0, 0.3);
-    let mut glow = Scene::new(disc);
-    (glow.disc_level, glow.canopy_level, glow.band_level) = (185.0, 255.0, 235.0);
-    glow.sky_level = 150.0;
-    let right = glow.render(w, h, 2.0, 5);
+    let right = glow_saturated_canopy(disc).render(w, h, 2.0, 5);
     let near = |v: &Verified, e: &Ellipse| (v.ellipse.cx - e.cx).hypot(v.ellipse.cy - e.cy) < 3.0;
     let alone = detector(&cam).verify_candidates(&right, never);
     assert!(
