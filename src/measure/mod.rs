@@ -388,18 +388,23 @@ impl Measurer {
                 .filter(|(_, keep)| **keep)
                 .map(|(p, _)| *p)
                 .collect();
-            // Step widths of the same points (the detector measured them
-            // along with the points; an absent or mismatched list leaves
-            // the covariance without its systematic term).
-            let inlier_widths: Option<Vec<f64>> =
-                (cand.rim_step_widths_px.len() == undistorted.len()).then(|| {
-                    cand.rim_step_widths_px
-                        .iter()
-                        .zip(&fitted.inliers)
-                        .filter(|(_, keep)| **keep)
-                        .map(|(w, _)| *w)
-                        .collect()
-                });
+            // The same points' step widths and reach to saturation (the
+            // detector measured them along with the points; an absent or
+            // mismatched list leaves the covariance without that
+            // systematic term).
+            let inliers_of = |per_point: &[f64]| -> Vec<f64> {
+                if per_point.len() != undistorted.len() {
+                    return Vec::new();
+                }
+                (per_point.iter().zip(&fitted.inliers))
+                    .filter(|(_, keep)| **keep)
+                    .map(|(v, _)| *v)
+                    .collect()
+            };
+            let (inlier_widths, inlier_clip) = (
+                inliers_of(&cand.rim_step_widths_px),
+                inliers_of(&cand.rim_clip_px),
+            );
             let uncertainty = pose::pose_uncertainty_with_edges(
                 &fitted.ellipse,
                 &self.camera,
@@ -407,7 +412,10 @@ impl Measurer {
                 self.drogue.inner_radius_m,
                 &quality,
                 &inlier_points,
-                inlier_widths.as_deref(),
+                pose::RimSteps {
+                    widths_px: &inlier_widths,
+                    clip_px: &inlier_clip,
+                },
             );
             // Unresolved: the answer given may be the mirror one, and what
             // is sent with it must cover that.

@@ -374,6 +374,7 @@ impl Detector {
             score,
             rim_contrast,
             step_widths_px: measured.step_widths_px,
+            clip_px: measured.clip_px,
             canopy,
         })
     }
@@ -385,6 +386,10 @@ pub(super) struct MeasuredRim {
     pub(super) points_px: Vec<[f64; 2]>,
     pub(super) undistorted: Vec<[f64; 2]>,
     pub(super) step_widths_px: Vec<f64>,
+    /// How far out from each point its step's light side reaches
+    /// saturation, pixels (empty for a scouting pass's points, and where
+    /// no step is clipped).
+    pub(super) clip_px: Vec<f64>,
 }
 
 impl MeasuredRim {
@@ -413,15 +418,17 @@ impl MeasuredRim {
                 .map(|(p, _)| p)
                 .collect()
         }
-        let (points_px, undistorted) = match pose_edges {
+        let (points_px, undistorted, clip_px) = match pose_edges {
             PoseEdges::Own(undistorted) => (
                 pick(points_px.iter().copied(), &kept),
                 pick(undistorted, &kept),
+                Vec::new(),
             ),
             PoseEdges::Shaded {
                 base_px,
                 shading,
                 found_undistorted,
+                clip_px,
             } => {
                 // Only a sharp step has its two sides' slopes where they
                 // were measured: a blurred one's lie in the blur's tails.
@@ -459,13 +466,20 @@ impl MeasuredRim {
                 // then picked.
                 let moved = pick(shaded_points(&base_px, &shading, canopy), &kept);
                 let undistorted = moved.iter().map(|&p| camera.undistort_px(p)).collect();
-                (moved, undistorted)
+                // Most rims have no clipped step: nothing to carry.
+                let clip_px = if clip_px.iter().any(|&c| c > 0.0) {
+                    pick(clip_px, &kept)
+                } else {
+                    Vec::new()
+                };
+                (moved, undistorted, clip_px)
             }
         };
         Self {
             points_px,
             undistorted,
             step_widths_px: pick(step_widths_px, &kept),
+            clip_px,
         }
     }
 }

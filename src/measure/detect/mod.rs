@@ -127,6 +127,14 @@ pub struct RimCandidate {
     /// (a blurred edge's mid-level crossing is only as sure as the levels
     /// on either side, which a ramp that wide mixes).
     pub rim_step_widths_px: Vec<f64>,
+    /// How far out from each rim point its step's light side reaches
+    /// saturation, pixels, aligned with `rim_points_px` (0 below
+    /// saturation; empty when no step is clipped or it was not measured):
+    /// a step into a canopy that a glare's glow lifted past 255 has its mid
+    /// level taken from the clipped level, and its point lies up to this
+    /// much short of the edge (the pose covariance's third systematic
+    /// term).
+    pub rim_clip_px: Vec<f64>,
 }
 
 /// The width a sharp rim step measures (the step's ends as the rim pass
@@ -238,6 +246,9 @@ struct Verified {
     rim_contrast: f64,
     /// Step width of each of `points_px`, pixels.
     step_widths_px: Vec<f64>,
+    /// How far out from each of `points_px` its step's light side reaches
+    /// saturation, pixels (empty when not measured or none is clipped).
+    clip_px: Vec<f64>,
     /// The canopy evidence: the share of its predicted rim that shows it
     /// (`None`: not judged, the rim off the frame or too small).
     canopy: Option<f64>,
@@ -638,6 +649,7 @@ impl Detector {
                     points_px: measured.points_px,
                     undistorted: measured.undistorted,
                     step_widths_px: measured.step_widths_px,
+                    clip_px: measured.clip_px,
                     ..found
                 }
             }
@@ -660,6 +672,7 @@ impl Verified {
             score: self.score,
             ellipse_px: self.ellipse,
             rim_step_widths_px: self.step_widths_px,
+            rim_clip_px: self.clip_px,
         }
     }
 }

@@ -887,6 +887,48 @@ fn the_local_contrast_source_finds_a_disc_on_a_saturated_canopy() {
     );
 }
 
+/// A disc on a canopy so light that the camera clips it (400 on a scale
+/// that ends at 255, its rim band below saturation): every step of the rim
+/// runs into saturation, its mid level is taken from the clipped level and
+/// its point lies short of the edge. Each point's distance out to
+/// saturation brackets the true edge (a circle: the edge lies along the
+/// ray, at the true radius): it lies between the point and that far out.
+/// On the same disc below saturation no point is clipped (none carried).
+#[test]
+fn a_clipped_steps_reach_to_saturation_brackets_its_edge() {
+    let (w, h) = (400, 300);
+    let cam = camera(w, h);
+    let disc = Ellipse::new(200.0, 150.0, 40.0, 40.0, 0.0);
+    let mut scene = Scene::new(disc);
+    (scene.canopy_level, scene.band_level, scene.sky_level) = (400.0, 235.0, 150.0);
+    let found = detector(&cam)
+        .detect(&scene.render(w, h, 1.0, 3), None)
+        .expect("the disc on a clipped canopy");
+    assert_eq!(found.rim_clip_px.len(), found.rim_points_px.len());
+    let (mut inward, mut bracketed) = (0.0, 0);
+    for (p, &clip) in found.rim_points_px.iter().zip(&found.rim_clip_px) {
+        // How far out from the point the true edge is.
+        let short = disc.a - (p[0] - disc.cx).hypot(p[1] - disc.cy);
+        inward += short;
+        if clip > 0.0 && (-0.05..=clip + 0.05).contains(&short) {
+            bracketed += 1;
+        }
+    }
+    let n = found.rim_points_px.len();
+    assert!(
+        inward / n as f64 > 0.1,
+        "the clipped steps' points lie short of the edge: the test shows nothing ({:.3} px)",
+        inward / n as f64
+    );
+    assert!(bracketed as f64 >= 0.95 * n as f64, "{bracketed} of {n}");
+    // Below saturation: no point is clipped.
+    scene.canopy_level = 200.0;
+    let found = detector(&cam)
+        .detect(&scene.render(w, h, 1.0, 3), None)
+        .expect("the disc");
+    assert!(found.rim_clip_px.is_empty(), "{:?}", found.rim_clip_px);
+}
+
 /// The local-contrast source is not tried where a candidate already shows
 /// its canopy rim beyond doubt: that candidate is the drogue. On the left a
 /// drogue whose canopy a patch of sky hides on one side (its share of the
@@ -1426,6 +1468,7 @@ fn seeds_inside_a_drogue_its_canopy_shows_are_not_tried_again() {
         score: 0.6,
         rim_contrast: 100.0,
         step_widths_px: Vec::new(),
+        clip_px: Vec::new(),
         canopy,
     };
     let seed_at = |along_major: f64, along_minor: f64| {

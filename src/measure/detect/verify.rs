@@ -6,9 +6,9 @@ use super::glare::{GlareCover, glare_before_step, glare_on_light_side};
 use super::search::Seed;
 use super::shading::ShadedEdge;
 use super::{
-    Detector, Reject, SHARP_STEP_OWN_PX, VEIL_MIN_GRAY, VEIL_SIGMAS, Verified, conic_fit, median,
-    polar_radius, polar_radius_local, ray_directions, rim, smoothing_half_for_contrast,
-    smoothing_half_for_ramp,
+    Detector, Reject, SATURATED_GRAY, SHARP_STEP_OWN_PX, VEIL_MIN_GRAY, VEIL_SIGMAS, Verified,
+    conic_fit, median, polar_radius, polar_radius_local, ray_directions, rim,
+    smoothing_half_for_contrast, smoothing_half_for_ramp,
 };
 use crate::measure::ellipse::{Ellipse, ExposureSweep};
 use image::GrayImage;
@@ -139,8 +139,11 @@ struct RaySteps {
     /// On a measuring pass (else empty), the edge the pose is measured
     /// from, distorted pixels ...
     measured_px: Vec<[f64; 2]>,
-    /// ... and what moves it for the canopy's shading.
+    /// ... and what moves it for the canopy's shading ...
     shading: Vec<ShadedEdge>,
+    /// ... and how far out from it the light side reaches saturation
+    /// ([`clipped_light_px`]; 0 for a step below saturation).
+    clip_px: Vec<f64>,
 }
 
 impl RaySteps {
@@ -155,6 +158,7 @@ impl RaySteps {
             glares: Vec::with_capacity(rays),
             measured_px: Vec::with_capacity(measuring),
             shading: Vec::with_capacity(measuring),
+            clip_px: Vec::with_capacity(measuring),
         }
     }
 
@@ -175,6 +179,7 @@ impl RaySteps {
         drop_marked(&mut self.glares, marked);
         drop_marked(&mut self.measured_px, marked);
         drop_marked(&mut self.shading, marked);
+        drop_marked(&mut self.clip_px, marked);
     }
 }
 
@@ -217,6 +222,9 @@ pub(super) enum PoseEdges {
         base_px: Vec<[f64; 2]>,
         shading: Vec<ShadedEdge>,
         found_undistorted: Vec<[f64; 2]>,
+        /// How far out from each edge its light side reaches saturation,
+        /// pixels (0 below saturation).
+        clip_px: Vec<f64>,
     },
 }
 
@@ -271,6 +279,29 @@ fn same_rim(a: &Ellipse, b: &Ellipse) -> bool {
 fn within_share(a: &Ellipse, b: &Ellipse, share: f64) -> bool {
     let close = |x: f64, y: f64| (x / y - 1.0).abs() <= share;
     (a.cx - b.cx).hypot(a.cy - b.cy) <= share * a.b && close(a.a, b.a) && close(a.b, b.b)
+}
+
+/// How far beyond `edge_s` profile `p` (sampled from `s_min` every `step`)
+/// first reaches saturation, pixels (0 if it does not). A step whose light
+/// side is clipped has its mid level taken between the dark level and the
+/// clipped one, below the true one, and its crossing short of the edge:
+/// for a step blurred by a symmetric spread the edge lies between that
+/// crossing and about where saturation begins (beyond it only for a light
+/// level more than twice the clipped one's distance above the dark), so
+/// the pose's covariance takes this distance as the point's possible
+/// inward displacement.
+fn clipped_light_px(p: &[f32], s_min: f64, step: f64, edge_s: f64) -> f64 {
+    let from = ((edge_s - s_min) / step).max(0.0) as usize;
+    let Some(j) = (from..p.len()).find(|&j| p[j] >= SATURATED_GRAY) else {
+        return 0.0;
+    };
+    // The crossing of the saturated level between the sample before and j.
+    let at = if j > from && p[j] > p[j - 1] {
+        (j - 1) as f64 + f64::from((SATURATED_GRAY - p[j - 1]) / (p[j] - p[j - 1]))
+    } else {
+        j as f64
+    };
+    (s_min + at * step - edge_s).max(0.0)
 }
 
 impl Detector {
@@ -910,8 +941,9 @@ impl Detector {
             } else {
                 &self.profile
             };
-            let glare = glare_on_light_side(raw, s0, 0.5, &e)
-                || (cover == GlareCover::Most && glare_before_step(raw, s0, 0.5, &e));
+            let light_clipped = glare_on_light_side(raw, s0, 0.5, &e);
+            let glare =
+                light_clipped || (cover == GlareCover::Most && glare_before_step(raw, s0, 0.5, &e));
             if half > 0 {
                 let mid = 0.5 * (e.dark + e.light);
                 let reach = 0.5 * self.smoothing_spread_px[half] + 1.0;
@@ -935,6 +967,16 @@ impl Detector {
                     [light_slope, dark_slope],
                     self.noise_gray,
                 ));
+                let raw = if half > 0 {
+                    &self.raw_profile
+                } else {
+                    &self.profile
+                };
+                steps.clip_px.push(if light_clipped {
+                    clipped_light_px(raw, s0, 0.5, measured.s)
+                } else {
+                    0.0
+                });
             }
             steps.contrasts.push(f64::from(e.light - e.dark));
             steps.mid_levels.push(0.5 * (e.dark + e.light));
@@ -1168,6 +1210,7 @@ impl Detector {
             widths_px,
             measured_px,
             shading,
+            clip_px,
             ..
         } = steps;
         let pose_edges = match rim_use {
@@ -1175,6 +1218,7 @@ impl Detector {
                 base_px: measured_px,
                 shading,
                 found_undistorted: undistorted,
+                clip_px,
             },
             RimUse::Scout => PoseEdges::Own(undistorted),
         };

@@ -7,7 +7,8 @@ mod uncertainty;
 pub use cone::cone_pose;
 pub(crate) use uncertainty::{EllipseParams, ellipse_from_params, ellipse_params};
 pub use uncertainty::{
-    PoseUncertainty, pose_uncertainty, pose_uncertainty_with_edges, with_unresolved_mirror,
+    PoseUncertainty, RimSteps, pose_uncertainty, pose_uncertainty_with_edges,
+    with_unresolved_mirror,
 };
 
 use crate::spatial::{Camera, Direction, Point};

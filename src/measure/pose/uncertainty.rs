@@ -93,14 +93,20 @@ const MAX_NEIGHBOUR_CORRELATION: f64 = 0.8;
 /// `g g^T`, for `s_i = COMMON_MODE_SHARE * sigma` (the common part of the
 /// scatter, [`COMMON_MODE_SHARE`]) and, when the points' step widths are
 /// known, `s_i = SYSTEMATIC_CURVATURE_FACTOR * w_i^2 / rho_i` (the blurred
-/// edge's, [`SYSTEMATIC_CURVATURE_FACTOR`]). Neither shrinks with the number
-/// of points. Points are assigned to the curve through `M^-1 (p - c)`
-/// (exact on the curve, first-order near it).
+/// edge's, [`SYSTEMATIC_CURVATURE_FACTOR`]); and for `d_i` the distance
+/// out to where a clipped step's light side saturates (`clip_px`: the edge
+/// lies between the point and about there), `s_i = d_i` and, as a glow's
+/// gradient clips one side of the rim more than the other,
+/// `s_i = d_i cos t_i / 2` and `d_i sin t_i / 2` (`t_i` the point's place
+/// on the curve), which move the centre. None shrinks with the number of
+/// points. Points are assigned to the curve through `M^-1 (p - c)` (exact
+/// on the curve, first-order near it).
 fn ellipse_covariance(
     e: &Ellipse,
     points_px: &[[f64; 2]],
     sigma_px: f64,
     step_widths_px: Option<&[f64]>,
+    clip_px: Option<&[f64]>,
 ) -> Option<SMatrix<f64, 5, 5>> {
     let p = ellipse_params(e);
     let m = Matrix2::new(p[2], p[3], p[3], p[4]);
@@ -108,6 +114,9 @@ fn ellipse_covariance(
     let det_m = m.determinant().abs();
     let mut jtj = SMatrix::<f64, 5, 5>::zeros();
     let mut jts = SVector::<f64, 5>::zeros();
+    let mut jtc = SVector::<f64, 5>::zeros();
+    let mut jtc_cos = SVector::<f64, 5>::zeros();
+    let mut jtc_sin = SVector::<f64, 5>::zeros();
     let mut jt1 = SVector::<f64, 5>::zeros();
     // (parameter angle, residual) of each point, for the neighbours' correlation.
     let mut along = Vec::with_capacity(points_px.len());
@@ -149,19 +158,34 @@ fn ellipse_covariance(
                 jts += row * (SYSTEMATIC_CURVATURE_FACTOR * width * width / rho);
             }
         }
+        if let Some(&clip) = clip_px.and_then(|c| c.get(i))
+            && clip > 0.0
+            && clip.is_finite()
+        {
+            jtc += row * clip;
+            jtc_cos += row * (clip * cos_t);
+            jtc_sin += row * (clip * sin_t);
+        }
     }
     jtj.fill_lower_triangle_with_upper_triangle();
     let inv = jtj.try_inverse()?;
     let inflation = neighbour_inflation(&mut along);
-    // The two systematic displacements, each common to all points with an
-    // unknown sign: the blurred edge's (per point, from its width) and the
-    // common part of the scatter (the same for all points).
+    // The systematic displacements, each common to all points: the
+    // blurred edge's (per point, from its width) and the common part of
+    // the scatter (the same for all points), each of unknown sign, and the
+    // clipped steps' (inward, up to the distance to saturation).
     let g_edge = inv * jts;
     let g_common = inv * jt1 * (COMMON_MODE_SHARE * sigma_px);
+    let g_clip = inv * jtc;
+    let g_clip_cos = inv * jtc_cos * 0.5;
+    let g_clip_sin = inv * jtc_sin * 0.5;
     Some(
         inv * (inflation * sigma_px * sigma_px)
             + g_edge * g_edge.transpose()
-            + g_common * g_common.transpose(),
+            + g_common * g_common.transpose()
+            + g_clip * g_clip.transpose()
+            + g_clip_cos * g_clip_cos.transpose()
+            + g_clip_sin * g_clip_sin.transpose(),
     )
 }
 
@@ -236,16 +260,31 @@ pub fn pose_uncertainty(
         radius_m,
         quality,
         inlier_points_px,
-        None,
+        RimSteps::default(),
     )
 }
 
-/// [`pose_uncertainty`] with the inlier points' step widths (pixels, one per
-/// point, as the detector measured them): adds the blurred edges'
+/// What the detector measured of each inlier point's step, for the
+/// covariance's systematic terms: slices aligned with the points (one that
+/// is empty or of another length is left out).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct RimSteps<'a> {
+    /// Each step's width, pixels: the blurred edge's term.
+    pub widths_px: &'a [f64],
+    /// How far out from each point its step's light side reaches
+    /// saturation, pixels (0 below it): the clipped steps' term.
+    pub clip_px: &'a [f64],
+}
+
+/// [`pose_uncertainty`] with what the detector measured of the inlier
+/// points' steps ([`RimSteps`]): their widths add the blurred edges'
 /// systematic displacement (see `SYSTEMATIC_CURVATURE_FACTOR`), which no
-/// residual shows. The measurement passes them; without them (`None`, or a
-/// slice of another length) only the points' scatter (independent,
-/// neighbour-correlated and common parts) is counted.
+/// residual shows; how far out from each point its step's light side
+/// reaches saturation adds the clipped steps' (a canopy lifted past 255 by
+/// a glare's glow: each point lies up to that distance short of the edge,
+/// all of them inward). Without them (empty, or of another length) only
+/// the points' scatter (independent, neighbour-correlated and common
+/// parts) is counted.
 pub fn pose_uncertainty_with_edges(
     ellipse_px: &Ellipse,
     camera: &CameraModel,
@@ -253,7 +292,7 @@ pub fn pose_uncertainty_with_edges(
     radius_m: f64,
     quality: &FitQuality,
     inlier_points_px: &[[f64; 2]],
-    step_widths_px: Option<&[f64]>,
+    steps: RimSteps,
 ) -> PoseUncertainty {
     let unknown = PoseUncertainty {
         position_cov_camera_m2: Matrix3::from_element(f64::NAN),
@@ -264,8 +303,10 @@ pub fn pose_uncertainty_with_edges(
         return unknown;
     }
     let sigma_px = quality.rms_residual_px * (n as f64 / (n - 5) as f64).sqrt();
-    let widths = step_widths_px.filter(|w| w.len() == n);
-    let Some(cov_e) = ellipse_covariance(ellipse_px, inlier_points_px, sigma_px, widths) else {
+    let widths = Some(steps.widths_px).filter(|w| w.len() == n);
+    let clip = Some(steps.clip_px).filter(|c| c.len() == n);
+    let Some(cov_e) = ellipse_covariance(ellipse_px, inlier_points_px, sigma_px, widths, clip)
+    else {
         return unknown;
     };
     let eig = cov_e.symmetric_eigen();
@@ -353,5 +394,40 @@ pub fn with_unresolved_mirror(
     PoseUncertainty {
         position_cov_camera_m2: u.position_cov_camera_m2 + d * d.transpose() * 0.5,
         normal_sigma_rad: (u.normal_sigma_rad.powi(2) + 0.5 * angle * angle).sqrt(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::f64::consts::TAU;
+
+    /// Points all round a circle whose steps were clipped, each of them up
+    /// to `d` short of the edge: the covariance then holds `d^2` in each
+    /// of M's diagonal terms (the radius moved by `d`, analytic for a
+    /// circle: `(J^T J)^-1 J^T d` is `d` on both) and `d^2 / 4` in the
+    /// centre's (the clipping's first harmonic, at half of `d`, is a shift
+    /// of the circle by half of `d`). Without them, next to nothing: the
+    /// points lie on the circle.
+    #[test]
+    fn clipped_steps_add_the_radius_and_the_centre_they_may_move() {
+        let (r, d) = (40.0, 0.3);
+        let e = Ellipse::new(300.0, 200.0, r, r, 0.0);
+        let points: Vec<[f64; 2]> = (0..360)
+            .map(|k| {
+                let t = TAU * f64::from(k) / 360.0;
+                [e.cx + r * t.cos(), e.cy + r * t.sin()]
+            })
+            .collect();
+        let clip = vec![d; points.len()];
+        let sigma = 1e-9;
+        let without = ellipse_covariance(&e, &points, sigma, None, None).unwrap();
+        assert!(without.amax() < 1e-12, "{without}");
+        let with = ellipse_covariance(&e, &points, sigma, None, Some(&clip)).unwrap();
+        // EllipseParams: cx, cy, M11, M12, M22.
+        for (k, expected) in [(0, d * d / 4.0), (1, d * d / 4.0), (2, d * d), (4, d * d)] {
+            assert!((with[(k, k)] - expected).abs() < 1e-9, "{k}: {with}");
+        }
+        assert!(with[(3, 3)].abs() < 1e-9, "{with}");
     }
 }
