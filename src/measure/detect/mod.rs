@@ -128,7 +128,8 @@ pub struct RimCandidate {
     /// on either side, which a ramp that wide mixes).
     pub rim_step_widths_px: Vec<f64>,
     /// How far out from each rim point its step's light side reaches
-    /// saturation, pixels, aligned with `rim_points_px` (0 below
+    /// saturation, distorted pixels along the point's ray (as
+    /// `rim_step_widths_px`), aligned with `rim_points_px` (0 below
     /// saturation; empty when no step is clipped or it was not measured):
     /// a step into a canopy that a glare's glow lifted past 255 has its mid
     /// level taken from the clipped level, and its point lies up to this
@@ -247,7 +248,8 @@ struct Verified {
     /// Step width of each of `points_px`, pixels.
     step_widths_px: Vec<f64>,
     /// How far out from each of `points_px` its step's light side reaches
-    /// saturation, pixels (empty when not measured or none is clipped).
+    /// saturation, distorted pixels along its ray (empty when not measured
+    /// or none is clipped).
     clip_px: Vec<f64>,
     /// The canopy evidence: the share of its predicted rim that shows it
     /// (`None`: not judged, the rim off the frame or too small).

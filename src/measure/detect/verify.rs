@@ -281,6 +281,12 @@ fn within_share(a: &Ellipse, b: &Ellipse, share: f64) -> bool {
     (a.cx - b.cx).hypot(a.cy - b.cy) <= share * a.b && close(a.a, b.a) && close(a.b, b.b)
 }
 
+/// A narrow pass's profile as sampled: `raw` (kept before smoothing) when
+/// it was smoothed with `half` > 0, else `profile` itself.
+fn unsmoothed<'a>(raw: &'a [f32], profile: &'a [f32], half: usize) -> &'a [f32] {
+    if half > 0 { raw } else { profile }
+}
+
 /// How far beyond `edge_s` profile `p` (sampled from `s_min` every `step`)
 /// first reaches saturation, pixels (0 if it does not). A step whose light
 /// side is clipped has its mid level taken between the dark level and the
@@ -718,12 +724,9 @@ impl Detector {
         if m_half <= half {
             return own();
         }
-        let raw = if half > 0 {
-            &self.raw_profile
-        } else {
-            &self.profile
-        };
-        faint.clone_from(raw);
+        let raw = unsmoothed(&self.raw_profile, &self.profile, half);
+        faint.clear();
+        faint.extend_from_slice(raw);
         rim::smooth(faint, m_half, &mut self.scratch);
         let reach = 0.5 * self.smoothing_spread_px[m_half] + 1.0;
         let Some(mut m) = rim::strongest_rise(faint, s0, 0.5, min_contrast) else {
@@ -906,11 +909,7 @@ impl Detector {
             let ramp_rounds = if widen > 1.0 { 2 } else { 0 };
             for _ in 0..ramp_rounds {
                 let Some(e) = found else { break };
-                let raw = if half > 0 {
-                    &self.raw_profile
-                } else {
-                    &self.profile
-                };
+                let raw = unsmoothed(&self.raw_profile, &self.profile, half);
                 if glare_on_light_side(raw, s0, 0.5, &e) {
                     break;
                 }
@@ -936,11 +935,7 @@ impl Detector {
             // glare streak lying over the disc: its width says nothing of
             // blur, and unless most steps are such, it gives no rim point
             // ([`Self::rim_pass_at`]).
-            let raw = if half > 0 {
-                &self.raw_profile
-            } else {
-                &self.profile
-            };
+            let raw = unsmoothed(&self.raw_profile, &self.profile, half);
             let light_clipped = glare_on_light_side(raw, s0, 0.5, &e);
             let glare =
                 light_clipped || (cover == GlareCover::Most && glare_before_step(raw, s0, 0.5, &e));
@@ -967,11 +962,7 @@ impl Detector {
                     [light_slope, dark_slope],
                     self.noise_gray,
                 ));
-                let raw = if half > 0 {
-                    &self.raw_profile
-                } else {
-                    &self.profile
-                };
+                let raw = unsmoothed(&self.raw_profile, &self.profile, half);
                 steps.clip_px.push(if light_clipped {
                     clipped_light_px(raw, s0, 0.5, measured.s)
                 } else {

@@ -269,10 +269,13 @@ pub fn pose_uncertainty(
 /// is empty or of another length is left out).
 #[derive(Clone, Copy, Debug, Default)]
 pub struct RimSteps<'a> {
-    /// Each step's width, pixels: the blurred edge's term.
+    /// Each step's width, pixels along its ray (as the detector measured
+    /// it): the blurred edge's term.
     pub widths_px: &'a [f64],
     /// How far out from each point its step's light side reaches
-    /// saturation, pixels (0 below it): the clipped steps' term.
+    /// saturation, pixels along the point's ray in the frame as seen (0
+    /// below it), taken as a displacement normal to the curve: the clipped
+    /// steps' term.
     pub clip_px: &'a [f64],
 }
 
