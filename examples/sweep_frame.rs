@@ -122,11 +122,22 @@ fn main() {
                 let off = |q: [f64; 3]| {
                     100.0 * (0..3).map(|i| (p[i] - q[i]).powi(2)).sum::<f64>().sqrt() / t.range_m
                 };
+                // The normal given against the truth's and its mirror's,
+                // degrees: the sweep counts more than 10 from the truth's
+                // as a false answer.
+                let n = &d.pose_camera.normal_camera;
+                let normal_off = |q: [f64; 3]| {
+                    let dot = (0..3).map(|i| n[i] * q[i]).sum::<f64>();
+                    let norm = (0..3).map(|i| q[i] * q[i]).sum::<f64>().sqrt() * n.norm();
+                    (dot / norm).clamp(-1.0, 1.0).acos().to_degrees()
+                };
                 println!(
-                    "off: centre {:.3} px, position {:.3} % of range from the truth, {:.3} % from its mirror",
+                    "off: centre {:.3} px, position {:.3} % of range from the truth, {:.3} % from its mirror; normal {:.2} / {:.2} degrees",
                     (e.cx - t.ellipse.cx).hypot(e.cy - t.ellipse.cy),
                     off(t.position_camera),
-                    off(t.alt_position_camera)
+                    off(t.alt_position_camera),
+                    normal_off(t.normal_camera),
+                    normal_off(t.alt_normal_camera)
                 );
             }
         }
