@@ -88,6 +88,10 @@ fn position_nees_on_simulator_frames_is_near_three_dof() {
         // (17 % above 11.34 at 135 px before their systematic term).
         Level::new(Factor::GlareGlow, 70.0),
         Level::new(Factor::GlareGlow, 135.0),
+        // A glare streak's skirt, convex across the rim's steps, lifts both
+        // their level reads above the light at the edge (10 % above 11.34
+        // before the light's curvature was taken out).
+        Level::new(Factor::Glare, 30.0),
     ];
     let mut sweep = Sweep::new(nees::SEED);
     let mut failures: Vec<String> = levels

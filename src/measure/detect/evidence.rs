@@ -432,10 +432,11 @@ impl MeasuredRim {
             } => {
                 // Only a sharp step has its two sides' slopes where they
                 // were measured: a blurred one's lie in the blur's tails.
+                let sharp: Vec<bool> = step_widths_px.iter().map(|&w| w <= SHARP_STEP_PX).collect();
                 let canopy = canopy_slope(&shading);
                 let mut beside = beside_dark(&shading, canopy, BESIDE_DARK_SIGMAS);
-                for (b, w) in beside.iter_mut().zip(&step_widths_px) {
-                    *b &= *w <= SHARP_STEP_PX;
+                for (b, s) in beside.iter_mut().zip(&sharp) {
+                    *b &= *s;
                 }
                 if let Some(canopy) = canopy
                     && beside.iter().zip(&kept).any(|(b, k)| *b && *k)
@@ -464,7 +465,7 @@ impl MeasuredRim {
                 }
                 // The shading's slope is the whole pass's: moved first,
                 // then picked.
-                let moved = pick(shaded_points(&base_px, &shading, canopy), &kept);
+                let moved = pick(shaded_points(&base_px, &shading, canopy, &sharp), &kept);
                 let undistorted = moved.iter().map(|&p| camera.undistort_px(p)).collect();
                 // Most rims have no clipped step: nothing to carry.
                 let clip_px = if clip_px.iter().any(|&c| c > 0.0) {

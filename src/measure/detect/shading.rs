@@ -14,6 +14,8 @@ pub(super) struct ShadedEdge {
     dir: [f64; 2],
     /// From the edge out to where its light level was taken, pixels.
     level_distance_px: f64,
+    /// From the edge in to where its dark level was taken, pixels.
+    dark_distance_px: f64,
     /// The profile's slope at the edge, gray levels per pixel.
     ramp_slope: f64,
     /// The light side's slope beyond the step over the step's contrast,
@@ -51,6 +53,9 @@ impl ShadedEdge {
             // The light level is the mean of three samples from `light_s`:
             // its centre is a sample (0.5 px) further.
             level_distance_px: e.light_s + 0.5 - e.s,
+            // The dark level is the mean of three samples ending at
+            // `dark_s`: its centre is a sample (0.5 px) nearer the origin.
+            dark_distance_px: e.s - e.dark_s + 0.5,
             ramp_slope: f64::from(e.ramp_slope),
             relative_slope: f64::from(light_slope / (e.light - e.dark)),
             contrast: f64::from(e.light - e.dark),
@@ -96,10 +101,13 @@ impl ShadedEdge {
 /// The shading is one property of the canopy, so its slope is the pass's
 /// `canopy` ([`canopy_slope`]; the points stay where they are without
 /// it), and each ray's move is at most half the distance it corrects for.
+/// On the `sharp` steps, whose two sides' slopes were read beside them,
+/// the curvature of light laid over both sides too ([`curvature_excess`]).
 pub(super) fn shaded_points(
     points_px: &[[f64; 2]],
     edges: &[ShadedEdge],
     canopy: Option<f64>,
+    sharp: &[bool],
 ) -> Vec<[f64; 2]> {
     let Some(relative_slope) = canopy else {
         return points_px.to_vec();
@@ -107,9 +115,13 @@ pub(super) fn shaded_points(
     points_px
         .iter()
         .zip(edges)
-        .map(|(p, e)| {
-            let excess =
+        .zip(sharp)
+        .map(|((p, e), &sharp)| {
+            let mut excess =
                 relative_slope * e.contrast * (0.5 * e.level_distance_px - 0.125 * e.width_px);
+            if sharp {
+                excess += curvature_excess(e, relative_slope);
+            }
             let limit = 0.5 * e.level_distance_px.max(0.0);
             let shift = if e.ramp_slope > 0.0 {
                 (-excess / e.ramp_slope).clamp(-limit, limit)
@@ -120,6 +132,37 @@ pub(super) fn shaded_points(
         })
         .collect()
 }
+
+/// How far above the level at the edge a curved light over both sides of
+/// a sharp step lifts its mid level, gray levels. The step's levels are
+/// read a little either side of it; a light whose level curves across the
+/// step (a glare streak's skirt, convex beyond its half width) is higher at
+/// both reads than at the edge by its curvature times the squared distance
+/// over two, and the crossing lies outward. The curvature is the change of
+/// slope between the two sides (the canopy's own slope, which
+/// [`shaded_points`] takes as a kink at the edge, taken out) over the
+/// distance between where the slopes were measured. Only where the dark
+/// side slopes beyond its noise ([`CURVED_LIGHT_SIGMAS`]): the disc is flat
+/// but for its own shading, so light laid over both sides shows there,
+/// while a canopy whose slope differs from the pass's median (its shading
+/// seen at another scale round a tilted rim) changes only the light side's.
+/// Sharp steps only (the caller's): a blurred step's slopes lie in the
+/// blur's tails.
+fn curvature_excess(e: &ShadedEdge, canopy: f64) -> f64 {
+    if e.relative_dark_slope.abs() <= CURVED_LIGHT_SIGMAS * e.relative_slope_sigma {
+        return 0.0;
+    }
+    // The slopes' windows' centres lie 0.75 px beyond the level reads.
+    let span = e.level_distance_px + e.dark_distance_px + 1.5;
+    let curvature = (e.relative_slope - canopy - e.relative_dark_slope) / span;
+    let reads = e.level_distance_px.powi(2) + e.dark_distance_px.powi(2);
+    let excess = curvature * e.contrast * 0.25 * reads;
+    if excess.is_finite() { excess } else { 0.0 }
+}
+
+/// Standard deviations of its noise beyond which a dark side's slope is
+/// light laid over the step ([`curvature_excess`]).
+const CURVED_LIGHT_SIGMAS: f64 = 3.0;
 
 /// The canopy's slope beside the pass's steps, relative to their contrast:
 /// the median of their light sides' (one ray's, over a few samples, is

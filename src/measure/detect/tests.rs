@@ -733,7 +733,7 @@ fn a_blurred_edge_on_a_shaded_canopy_is_placed_at_the_edge() {
         .collect();
     let points = vec![[e.s, 0.0]; 12];
     let canopy = super::shading::canopy_slope(&edges);
-    let moved = super::shading::shaded_points(&points, &edges, canopy);
+    let moved = super::shading::shaded_points(&points, &edges, canopy, &[false; 12]);
     for p in moved {
         assert!(
             (p[0] - edge).abs() < 0.05,
@@ -741,6 +741,74 @@ fn a_blurred_edge_on_a_shaded_canopy_is_placed_at_the_edge() {
             p[0] - edge,
             e.s - edge
         );
+    }
+}
+
+/// A sharp step (a 2.5 px box blur, the edge at 20 px) under a glare
+/// streak's skirt: a Gaussian light of 300 gray levels across both sides,
+/// 30 px wide at half its height, its centre line two standard deviations
+/// inside the edge, so that it falls outward and is convex across the step
+/// (0.75 gray levels per pixel squared). Its light over the two level reads
+/// is above its light at the edge by the curvature times their squared
+/// distance over two: the mid-level crossing lies outward (0.046 px here).
+/// Four rays of twelve see it, the other eight a flat canopy (whose median
+/// slope, the canopy's, is then none); placed for the light's curvature,
+/// the four lie within a quarter of that of the flat step's crossing
+/// (0.002 px here) and the eight stay where they were.
+#[test]
+fn a_sharp_edge_under_a_curved_light_is_placed_at_the_edge() {
+    let (edge, blur, dark, contrast) = (20.0, 2.5, 40.0, 100.0);
+    let sigma = 30.0 / (8.0 * std::f64::consts::LN_2).sqrt();
+    let centre = edge - 2.0 * sigma;
+    let integral = |s: f64| {
+        if s <= edge {
+            dark * s
+        } else {
+            dark * edge + (dark + contrast) * (s - edge)
+        }
+    };
+    let step = |s: f64| (integral(s + blur / 2.0) - integral(s - blur / 2.0)) / blur;
+    let glow = |s: f64| 300.0 * (-(s - centre).powi(2) / (2.0 * sigma * sigma)).exp();
+    let sampled = |f: &dyn Fn(f64) -> f64| -> Vec<f32> {
+        (0..80).map(|k| f(f64::from(k) * 0.5) as f32).collect()
+    };
+    let flat = sampled(&step);
+    let lit = sampled(&|s| step(s) + glow(s));
+    let edge_of = |p: &[f32]| {
+        let e = super::rim::strongest_rise(p, 0.0, 0.5, 10.0).expect("a step");
+        let slopes = [
+            super::rim::light_side_slope(p, 0.0, 0.5, &e),
+            super::rim::dark_side_slope(p, 0.0, 0.5, &e),
+        ];
+        (
+            e,
+            super::shading::ShadedEdge::new([1.0, 0.0], &e, slopes, 0.0),
+        )
+    };
+    let (e_flat, _) = edge_of(&flat);
+    let (e_lit, _) = edge_of(&lit);
+    let bias = e_lit.s - e_flat.s;
+    assert!(
+        bias > 0.015,
+        "the curved light moves the crossing {bias:.4} px"
+    );
+    let rays: Vec<_> = (0..12)
+        .map(|k| edge_of(if k % 3 == 0 { &lit } else { &flat }))
+        .collect();
+    let points: Vec<[f64; 2]> = rays.iter().map(|(e, _)| [e.s, 0.0]).collect();
+    let edges: Vec<_> = rays.into_iter().map(|(_, s)| s).collect();
+    let canopy = super::shading::canopy_slope(&edges);
+    let moved = super::shading::shaded_points(&points, &edges, canopy, &[true; 12]);
+    for (k, p) in moved.iter().enumerate() {
+        if k % 3 == 0 {
+            let left = p[0] - e_flat.s;
+            assert!(
+                left.abs() < 0.25 * bias,
+                "placed {left:+.4} px from the flat step's crossing (before: {bias:+.4})"
+            );
+        } else {
+            assert_eq!(p[0], e_flat.s, "a ray without the light stays");
+        }
     }
 }
 
