@@ -139,6 +139,15 @@ fn main() {
                     normal_off(t.normal_camera),
                     normal_off(t.alt_normal_camera)
                 );
+                // The position's reported sigma (root of the covariance's
+                // trace) beside its error, mm: whether the covariance
+                // covers the answer given.
+                let err_m = off(t.position_camera) * t.range_m / 100.0;
+                println!(
+                    "reported position sigma {:.1} mm (root of the trace) for an error of {:.1} mm",
+                    1e3 * d.position_cov_body_m2.trace().max(0.0).sqrt(),
+                    1e3 * err_m
+                );
             }
         }
     }

@@ -490,13 +490,14 @@ fn the_inside_of_a_ring_without_a_canopy_is_no_drogue() {
 /// that shows no canopy, concentric at `r / R` of its size, by the narrow
 /// passes (which take no rim point on a step into saturation). These
 /// frames (seeds 1-32) were undetected; each is now the disc, right by the
-/// sweep's own measure.
+/// sweep's own measure. (Seed 19 frame 1 was one of them until the canopy
+/// test took the fit's spread into account: its disc, 0.6 px off, is a
+/// weak candidate whose canopy rim the fit no longer lets judge, and is
+/// refused as `weak_unjudged`.)
 #[test]
 fn the_disc_is_looked_for_inside_a_rim_that_shows_no_canopy() {
-    let mut wrong = frames_not_the_disc(
-        "glare streak 30 px wide",
-        &[(19, 1, true), (23, 21, true), (28, 9, true)],
-    );
+    let mut wrong =
+        frames_not_the_disc("glare streak 30 px wide", &[(23, 21, true), (28, 9, true)]);
     wrong.extend(everything_frames_not_the_disc(&[(1, 27, true)]));
     assert!(wrong.is_empty(), "{wrong:#?}");
 }

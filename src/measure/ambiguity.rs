@@ -29,11 +29,21 @@
 //! [`MIN_DISCRIMINATING`] such points, and only when the difference in
 //! edges found is beyond chance ([`MIN_EVIDENCE_Z`]); otherwise the rim
 //! says nothing and the answer stays `unresolved` (or goes to continuity).
+//!
+//! The predictions are only as good as the inner ellipse: a disc fitted from
+//! half its rim (the other half under a glare streak) may be a pixel off,
+//! and its predicted canopy rim, 2.2 times larger, more than two. The true
+//! pose's prediction then misses the rim, and the mirror's may cross it by
+//! chance. [`canopy_supports_where`] therefore also takes what the fit may
+//! be ([`FitSpread`]): the rim judges only where enough of its telling
+//! points lie farther from the other rim than `SEPARATION_SIGMAS` times
+//! the spread of their own prediction.
 
 use super::detect::{canopy, rim};
-use super::pose::CirclePose;
+use super::pose::{CirclePose, EllipseSpread, ellipse_params};
 use crate::camera::CameraModel;
 use image::GrayImage;
+use nalgebra::{Matrix2, Vector2};
 
 /// Points sampled along the predicted rim (every 5 degrees of the circle:
 /// on the reference sets 120 points, every 3 degrees, decided the same
@@ -238,24 +248,47 @@ pub fn canopy_supports(
     canopy_radius_m: f64,
     band_m: f64,
 ) -> [Option<f64>; 2] {
-    RimEvidence::new(image, camera, solutions, canopy_radius_m, band_m).supports(|_| true)
+    RimEvidence::new(image, camera, solutions, None, canopy_radius_m, band_m).supports(|_| true)
 }
 
-/// [`canopy_supports`], and where that leaves the better solution below
-/// `DARKENING_FALLBACK_BELOW`, the same judged only on the rim points
-/// (distorted pixels) that `judge` takes (those where a motion blur runs
-/// along the rim, not across it: [`SmearedRim`]); the answer whose better
-/// solution has more support is given, so an answer of the whole rim is
-/// never lost.
+/// What the fit of the inner circle may be, for how far the rims it
+/// predicts may be off: its one-sigma ellipses (`pose::EllipseSpread`,
+/// undistorted pixels) and the inner circle's radius, metres (a rim of
+/// radius R is the fit scaled by R over it).
+#[derive(Clone, Copy, Debug)]
+pub struct FitSpread<'a> {
+    /// The fit and its one-sigma ellipses.
+    pub spread: &'a EllipseSpread,
+    /// The radius of the circle fitted, metres.
+    pub inner_radius_m: f64,
+}
+
+/// [`canopy_supports`] for predictions as uncertain as the fit
+/// (`fit_spread`; `None`: the predictions taken as exact): the rim says
+/// nothing unless each solution has `MIN_DISCRIMINATING` of its telling
+/// points also `SEPARATION_SIGMAS` times its own prediction's spread
+/// (`prediction_spread`) from the other solution's rim. Where that leaves the better solution below `DARKENING_FALLBACK_BELOW`,
+/// the same is judged only on the rim points (distorted pixels) that
+/// `judge` takes (those where a motion blur runs along the rim, not across
+/// it: [`SmearedRim`]); the answer whose better solution has more support
+/// is given, so an answer of the whole rim is never lost.
 pub fn canopy_supports_where(
     image: &GrayImage,
     camera: &CameraModel,
     solutions: &[CirclePose; 2],
+    fit_spread: Option<FitSpread>,
     canopy_radius_m: f64,
     band_m: f64,
     judge: impl Fn([f64; 2]) -> bool + Copy,
 ) -> [Option<f64>; 2] {
-    let mut evidence = RimEvidence::new(image, camera, solutions, canopy_radius_m, band_m);
+    let mut evidence = RimEvidence::new(
+        image,
+        camera,
+        solutions,
+        fit_spread,
+        canopy_radius_m,
+        band_m,
+    );
     let whole = evidence.supports(|_| true);
     if best_support(&whole).is_some_and(|b| b >= DARKENING_FALLBACK_BELOW) {
         return whole;
@@ -288,6 +321,9 @@ struct CurvePair {
     rims: [Vec<RimPoint>; 2],
     /// Each rim point's distance to the other solution's rim, pixels.
     apart_px: [Vec<f64>; 2],
+    /// Each rim point's spread as the fit may move it, pixels (0 without
+    /// a spread).
+    spread_px: [Vec<f64>; 2],
     profiles: [Vec<Option<AcrossProfile>>; 2],
     offsets: [Option<[EdgeOffsets; 2]>; 3],
 }
@@ -304,6 +340,7 @@ impl CurvePair {
         image: &GrayImage,
         camera: &CameraModel,
         solutions: &[CirclePose; 2],
+        fit_spread: Option<FitSpread>,
         radius_m: f64,
     ) -> Option<Self> {
         let [Some(rim0), Some(rim1)] = solutions.map(|pose| predicted_rim(camera, &pose, radius_m))
@@ -319,9 +356,15 @@ impl CurvePair {
             return None;
         }
         let profiles = [rim_profiles(image, &rim0), rim_profiles(image, &rim1)];
+        let scale = fit_spread.map_or(1.0, |f| radius_m / f.inner_radius_m);
+        let spread_px = [
+            prediction_spread(&rim0, fit_spread.as_ref(), scale),
+            prediction_spread(&rim1, fit_spread.as_ref(), scale),
+        ];
         Some(Self {
             rims: [rim0, rim1],
             apart_px,
+            spread_px,
             profiles,
             offsets: [None, None, None],
         })
@@ -335,7 +378,7 @@ impl CurvePair {
         let profiles = &self.profiles;
         let offsets = self.offsets[polarity as usize]
             .get_or_insert_with(|| profiles.each_ref().map(|p| edge_offsets(p, polarity)));
-        supports_with(offsets, &self.rims, &self.apart_px, judge)
+        supports_with(offsets, &self.rims, &self.apart_px, &self.spread_px, judge)
     }
 }
 
@@ -346,6 +389,7 @@ struct RimEvidence<'a> {
     image: &'a GrayImage,
     camera: &'a CameraModel,
     solutions: &'a [CirclePose; 2],
+    fit_spread: Option<FitSpread<'a>>,
     end_radius_m: Option<f64>,
     rim: Option<CurvePair>,
     /// The canopy's end, taken on first need.
@@ -357,6 +401,7 @@ impl<'a> RimEvidence<'a> {
         image: &'a GrayImage,
         camera: &'a CameraModel,
         solutions: &'a [CirclePose; 2],
+        fit_spread: Option<FitSpread<'a>>,
         canopy_radius_m: f64,
         band_m: f64,
     ) -> Self {
@@ -365,8 +410,9 @@ impl<'a> RimEvidence<'a> {
             image,
             camera,
             solutions,
+            fit_spread,
             end_radius_m: has_band.then_some(canopy_radius_m - band_m),
-            rim: CurvePair::new(image, camera, solutions, canopy_radius_m),
+            rim: CurvePair::new(image, camera, solutions, fit_spread, canopy_radius_m),
             end: None,
         }
     }
@@ -392,10 +438,11 @@ impl<'a> RimEvidence<'a> {
         let Some(end_radius_m) = self.end_radius_m else {
             return answer;
         };
-        let (image, camera, solutions) = (self.image, self.camera, self.solutions);
+        let (image, camera, solutions, spread) =
+            (self.image, self.camera, self.solutions, self.fit_spread);
         let end = self
             .end
-            .get_or_insert_with(|| CurvePair::new(image, camera, solutions, end_radius_m));
+            .get_or_insert_with(|| CurvePair::new(image, camera, solutions, spread, end_radius_m));
         match end {
             Some(end) => better_supported(answer, end.supports(Polarity::CanopyEnd, judge)),
             None => answer,
@@ -411,6 +458,7 @@ fn supports_with(
     offsets: &[EdgeOffsets; 2],
     rims: &[Vec<RimPoint>; 2],
     apart_px: &[Vec<f64>; 2],
+    spread_px: &[Vec<f64>; 2],
     judge: impl Fn([f64; 2]) -> bool,
 ) -> [Option<f64>; 2] {
     let in_image = |o: &[Option<Option<f64>>]| o.iter().filter(|x| x.is_some()).count();
@@ -448,6 +496,25 @@ fn supports_with(
             .map(|(&d, p)| d >= min_separation && judge(p.at))
             .collect::<Vec<bool>>()
     });
+    // Of those, the points whose own prediction the fit could not have
+    // moved onto the other rim: too few, and the rim cannot tell. (They
+    // are not what is counted: leaving out the points both rims share
+    // would raise the counts' z by itself.)
+    let firm = [0, 1].map(|i| {
+        let spread = |k: usize| spread_px[i].get(k).copied().unwrap_or(0.0);
+        (apart[i]
+            .iter()
+            .zip(&apart_px[i])
+            .zip(&offsets[i])
+            .enumerate())
+        .filter(|&(k, ((&use_it, &d), o))| {
+            use_it && o.is_some() && d >= SEPARATION_SIGMAS * spread(k)
+        })
+        .count()
+    });
+    if firm.iter().any(|&n| n < MIN_DISCRIMINATING) {
+        return [None, None];
+    }
     let mut judged = [0usize; 2];
     let mut edges = [0usize; 2];
     for i in 0..2 {
@@ -466,6 +533,52 @@ fn supports_with(
         return [None, None];
     }
     [Some(b / judged[0] as f64), Some(c / judged[1] as f64)]
+}
+
+/// Each point of `rim` (a prediction for a circle `scale` times the fit's)
+/// as the fit may move it, pixels across the curve: the root of half the
+/// sum of its squared displacements over the fit's one-sigma ellipses
+/// ([`FitSpread`]); zeros without one. To first order the predicted rim is
+/// the fit's ellipse scaled about its centre (`q = c + k M u`), so a fit
+/// moved by `(dc, dM)` moves it across the curve by `n . (dc + k dM u)`,
+/// with `u` the point's place on the unit circle and `n` the curve's normal
+/// there (computed before the lens, where the fit is; the lens changes the
+/// figure by a few per cent at the frame's edges).
+fn prediction_spread(rim: &[RimPoint], fit: Option<&FitSpread>, scale: f64) -> Vec<f64> {
+    let Some(fit) = fit else {
+        return vec![0.0; rim.len()];
+    };
+    let nominal = ellipse_params(&fit.spread.nominal);
+    let m = Matrix2::new(nominal[2], nominal[3], nominal[3], nominal[4]);
+    let Some(m_inv) = m.try_inverse() else {
+        return vec![0.0; rim.len()];
+    };
+    let moved: Vec<_> = fit
+        .spread
+        .moved
+        .iter()
+        .map(|e| ellipse_params(e) - nominal)
+        .collect();
+    rim.iter()
+        .map(|p| {
+            let [x, y] = p.at_undistorted;
+            let d = Vector2::new(x - nominal[0], y - nominal[1]);
+            let Some(u) = (m_inv * d).try_normalize(0.0) else {
+                return 0.0;
+            };
+            let Some(n) = (m_inv * u).try_normalize(0.0) else {
+                return 0.0;
+            };
+            let var: f64 = (moved.iter())
+                .map(|dp| {
+                    let dm = Matrix2::new(dp[2], dp[3], dp[3], dp[4]);
+                    let shift = Vector2::new(dp[0], dp[1]) + scale * (dm * u);
+                    0.5 * n.dot(&shift).powi(2)
+                })
+                .sum();
+            var.sqrt()
+        })
+        .collect()
 }
 
 /// Distance of each point of `from` to the closed polyline through `to`,
@@ -505,6 +618,8 @@ fn edge_offsets(profiles: &[Option<AcrossProfile>], polarity: Polarity) -> EdgeO
 struct RimPoint {
     at: [f64; 2],
     out: [f64; 2],
+    /// `at` before the lens (undistorted pixels), where the fit's ellipse is.
+    at_undistorted: [f64; 2],
 }
 
 /// Distance from `p` to the closed polyline through `rim` (pixels), and the
@@ -577,11 +692,12 @@ fn predicted_rim(
     );
     for &(cos_t, sin_t) in rim_directions() {
         let radial = cos_t * e1 + sin_t * e2;
+        let point = pose.centre_camera_m + canopy_radius_m * radial;
         // The image's outward direction is where the rim point moves as the
         // radius grows: the projection's derivative along `radial`.
-        let Some((p, d)) = camera.project_px_with_derivative(
-            &(pose.centre_camera_m + canopy_radius_m * radial),
-            &radial,
+        let (Some((p, d)), Some(at_undistorted)) = (
+            camera.project_px_with_derivative(&point, &radial),
+            camera.project_undistorted_px(&point),
         ) else {
             continue;
         };
@@ -596,6 +712,7 @@ fn predicted_rim(
         rim.push(RimPoint {
             at: p,
             out: [d[0] / len, d[1] / len],
+            at_undistorted,
         });
     }
     let big_enough = (max_u - min_u).min(max_v - min_v) >= 2.0 * MIN_RIM_SIZE_PX;
@@ -730,6 +847,7 @@ impl SmearedRim {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::measure::ellipse::Ellipse;
     use crate::spatial::{Direction, Point};
     use crate::testing::vga_camera;
     use image::Luma;
@@ -876,7 +994,8 @@ mod tests {
         let centre = cam.project_px(&truth.centre_camera_m).unwrap();
         let rim = blurred_rim(centre, 12.0);
         let judged = |p| !rim.at(p);
-        let [t, m] = canopy_supports_where(&image, &cam, &[truth, mirrored], 0.33, BAND_M, judged);
+        let [t, m] =
+            canopy_supports_where(&image, &cam, &[truth, mirrored], None, 0.33, BAND_M, judged);
         let (t, m) = (t.expect("decided"), m.expect("decided"));
         assert!(t > 0.5 && m < 0.5, "true {t}, mirror {m}");
     }
@@ -956,14 +1075,99 @@ mod tests {
         );
     }
 
+    /// A fit of the pair's inner circle (a circle of its size about its
+    /// centre's image: where the spread is read, not what it is) and its
+    /// copies moved by `d_px` either way along x and y: the spread of a fit
+    /// that may be that far off.
+    fn shifted_fits(cam: &CameraModel, pose: &CirclePose, d_px: f64) -> EllipseSpread {
+        let [cx, cy] = cam.project_px(&pose.centre_camera_m).expect("in view");
+        let r = 800.0 * 0.15 / pose.centre_camera_m.z;
+        let circle = |dx: f64, dy: f64| Ellipse::new(cx + dx, cy + dy, r, r, 0.0);
+        EllipseSpread {
+            nominal: circle(0.0, 0.0),
+            moved: vec![
+                circle(d_px, 0.0),
+                circle(-d_px, 0.0),
+                circle(0.0, d_px),
+                circle(0.0, -d_px),
+            ],
+        }
+    }
+
+    /// A prediction is as good as the fit it comes from: the same drogue
+    /// decides for the true pose when the fit is exact or a tenth of a
+    /// pixel off, but not when it may be 4 px off (the canopy rims then
+    /// move by more than the two solutions' rims are apart, and a rim
+    /// crossing the mirror's prediction by chance would decide).
+    #[test]
+    fn a_fit_that_may_be_off_by_more_than_the_rims_are_apart_does_not_decide() {
+        let cam = camera();
+        let pair = tilted_and_mirrored();
+        let image = render(&cam, &pair[0]);
+        let all = |_: [f64; 2]| true;
+        let (tenth, four) = (
+            shifted_fits(&cam, &pair[0], 0.1),
+            shifted_fits(&cam, &pair[0], 4.0),
+        );
+        let fit = |spread| FitSpread {
+            spread,
+            inner_radius_m: 0.15,
+        };
+        for spread in [None, Some(fit(&tenth))] {
+            let [t, m] = canopy_supports_where(&image, &cam, &pair, spread, 0.33, BAND_M, all);
+            let (t, m) = (t.expect("decided"), m.expect("decided"));
+            assert!(t > 0.9 && m < 0.5, "{spread:?}: true {t}, mirror {m}");
+        }
+        assert_eq!(
+            canopy_supports_where(&image, &cam, &pair, Some(fit(&four)), 0.33, BAND_M, all),
+            [None, None]
+        );
+    }
+
+    /// Over the four shifts (either way along x and y) a point's squared
+    /// displacements across the curve sum to twice the shift squared,
+    /// whatever the curve's direction there: its spread is the shift. A
+    /// fit one pixel larger moves a rim 2.2 times as large by 2.2 px.
+    #[test]
+    fn a_rims_spread_is_what_the_moved_fits_move_it_by() {
+        let cam = camera();
+        let pair = tilted_and_mirrored();
+        let rim = predicted_rim(&cam, &pair[0], 0.33).expect("a rim");
+        let fits = shifted_fits(&cam, &pair[0], 1.5);
+        let fit = FitSpread {
+            spread: &fits,
+            inner_radius_m: 0.15,
+        };
+        let spread = prediction_spread(&rim, Some(&fit), 2.2);
+        assert_eq!(spread.len(), rim.len());
+        assert!(spread.iter().all(|s| (s - 1.5).abs() < 1e-9), "{spread:?}");
+        let n = fits.nominal;
+        let larger = EllipseSpread {
+            nominal: n,
+            moved: vec![Ellipse::new(n.cx, n.cy, n.a + 1.0, n.b + 1.0, 0.0)],
+        };
+        let fit = FitSpread {
+            spread: &larger,
+            inner_radius_m: 0.15,
+        };
+        // One moved fit carries half its variance: sqrt(2.2^2 / 2).
+        let expected = 2.2 / 2f64.sqrt();
+        for s in prediction_spread(&rim, Some(&fit), 2.2) {
+            assert!((s - expected).abs() < 1e-9, "{s}, not {expected}");
+        }
+        assert!(prediction_spread(&rim, None, 2.2).iter().all(|&s| s == 0.0));
+    }
+
     #[test]
     fn distance_to_rim_matches_a_full_search() {
         let rim: Vec<RimPoint> = (0..SAMPLES)
             .map(|k| {
                 let t = k as f64 * std::f64::consts::TAU / SAMPLES as f64;
+                let at = [100.0 + 80.0 * t.cos(), 50.0 + 20.0 * t.sin()];
                 RimPoint {
-                    at: [100.0 + 80.0 * t.cos(), 50.0 + 20.0 * t.sin()],
+                    at,
                     out: [t.cos(), t.sin()],
+                    at_undistorted: at,
                 }
             })
             .collect();

@@ -346,36 +346,6 @@ impl Measurer {
                 tracing::debug!(seq = frame.seq, "not detected: no pose from the ellipse");
                 return Err(refused(MissReason::NoPose));
             };
-            // Where a motion blur smears the disc's rim (its steps' widths),
-            // the canopy's rim is smeared too.
-            let smeared = ambiguity::SmearedRim::new(
-                self.camera
-                    .distort_px([fitted.ellipse.cx, fitted.ellipse.cy]),
-                &cand.rim_points_px,
-                &cand.rim_step_widths_px,
-            );
-            let canopy_scores = ambiguity::canopy_supports_where(
-                &frame.image,
-                &self.camera,
-                &[first, second],
-                self.drogue.canopy_radius_m,
-                self.drogue.canopy_band_m,
-                |p| !smeared.at(p),
-            );
-            if !tracked && weak_and_unjudged(&fitted.ellipse, canopy_scores, cand.score) {
-                tracing::debug!(
-                    seq = frame.seq,
-                    score = cand.score,
-                    "not detected: a weak candidate whose tilted canopy rim cannot be judged"
-                );
-                return Err(refused(MissReason::WeakUnjudged));
-            }
-            let choice = self.tracker.choose(
-                [first, second],
-                canopy_scores,
-                frame.capture_time_ns,
-                &fitted.ellipse,
-            );
             let quality = FitQuality {
                 points: cand.rim_points_px.len(),
                 inliers: fitted.inliers.iter().filter(|&&k| k).count(),
@@ -405,18 +375,61 @@ impl Measurer {
                 inliers_of(&cand.rim_step_widths_px),
                 inliers_of(&cand.rim_clip_px),
             );
-            let uncertainty = pose::pose_uncertainty_with_edges(
-                &fitted.ellipse,
-                &self.camera,
-                &choice.pose,
-                self.drogue.inner_radius_m,
-                &quality,
-                &inlier_points,
-                pose::RimSteps {
-                    widths_px: &inlier_widths,
-                    clip_px: &inlier_clip,
-                },
+            // What the fit may be: for the pose's covariance, and for how
+            // far the canopy rim each solution predicts may be off. The
+            // latter without the clipped steps' term: that bound on a
+            // glow's inward pull is 5-20 times the error where a glow
+            // saturates the canopy (README, "Pose, ambiguity and
+            // uncertainty"), and would silence the rim there.
+            let steps = pose::RimSteps {
+                widths_px: &inlier_widths,
+                clip_px: &inlier_clip,
+            };
+            let spreads = pose::ellipse_spreads(&fitted.ellipse, &quality, &inlier_points, steps);
+            let fit_spread = spreads.as_ref().map(|[_, unclipped]| ambiguity::FitSpread {
+                spread: unclipped,
+                inner_radius_m: self.drogue.inner_radius_m,
+            });
+            // Where a motion blur smears the disc's rim (its steps' widths),
+            // the canopy's rim is smeared too.
+            let smeared = ambiguity::SmearedRim::new(
+                self.camera
+                    .distort_px([fitted.ellipse.cx, fitted.ellipse.cy]),
+                &cand.rim_points_px,
+                &cand.rim_step_widths_px,
             );
+            let canopy_scores = ambiguity::canopy_supports_where(
+                &frame.image,
+                &self.camera,
+                &[first, second],
+                fit_spread,
+                self.drogue.canopy_radius_m,
+                self.drogue.canopy_band_m,
+                |p| !smeared.at(p),
+            );
+            if !tracked && weak_and_unjudged(&fitted.ellipse, canopy_scores, cand.score) {
+                tracing::debug!(
+                    seq = frame.seq,
+                    score = cand.score,
+                    "not detected: a weak candidate whose tilted canopy rim cannot be judged"
+                );
+                return Err(refused(MissReason::WeakUnjudged));
+            }
+            let choice = self.tracker.choose(
+                [first, second],
+                canopy_scores,
+                frame.capture_time_ns,
+                &fitted.ellipse,
+            );
+            let uncertainty = match &spreads {
+                Some([spread, _]) => pose::pose_uncertainty_from_spread(
+                    spread,
+                    &self.camera,
+                    &choice.pose,
+                    self.drogue.inner_radius_m,
+                ),
+                None => pose::PoseUncertainty::unknown(),
+            };
             // Unresolved: the answer given may be the mirror one, and what
             // is sent with it must cover that.
             let uncertainty = match (choice.how, &choice.alternative) {

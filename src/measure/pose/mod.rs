@@ -7,8 +7,8 @@ mod uncertainty;
 pub use cone::cone_pose;
 pub(crate) use uncertainty::{EllipseParams, ellipse_from_params, ellipse_params};
 pub use uncertainty::{
-    PoseUncertainty, RimSteps, pose_uncertainty, pose_uncertainty_with_edges,
-    with_unresolved_mirror,
+    EllipseSpread, PoseUncertainty, RimSteps, ellipse_spread, ellipse_spreads, pose_uncertainty,
+    pose_uncertainty_from_spread, pose_uncertainty_with_edges, with_unresolved_mirror,
 };
 
 use crate::spatial::{Camera, Direction, Point};

@@ -101,13 +101,14 @@ const MAX_NEIGHBOUR_CORRELATION: f64 = 0.8;
 /// on the curve), which move the centre. None shrinks with the number of
 /// points. Points are assigned to the curve through `M^-1 (p - c)` (exact
 /// on the curve, first-order near it).
+/// Returned in two parts: all but the clipped steps' terms, and those.
 fn ellipse_covariance(
     e: &Ellipse,
     points_px: &[[f64; 2]],
     sigma_px: f64,
     step_widths_px: Option<&[f64]>,
     clip_px: Option<&[f64]>,
-) -> Option<SMatrix<f64, 5, 5>> {
+) -> Option<(SMatrix<f64, 5, 5>, SMatrix<f64, 5, 5>)> {
     let p = ellipse_params(e);
     let m = Matrix2::new(p[2], p[3], p[3], p[4]);
     let m_inv = m.try_inverse()?;
@@ -179,14 +180,14 @@ fn ellipse_covariance(
     let g_clip = inv * jtc;
     let g_clip_cos = inv * jtc_cos * 0.5;
     let g_clip_sin = inv * jtc_sin * 0.5;
-    Some(
+    Some((
         inv * (inflation * sigma_px * sigma_px)
             + g_edge * g_edge.transpose()
-            + g_common * g_common.transpose()
-            + g_clip * g_clip.transpose()
+            + g_common * g_common.transpose(),
+        g_clip * g_clip.transpose()
             + g_clip_cos * g_clip_cos.transpose()
             + g_clip_sin * g_clip_sin.transpose(),
-    )
+    ))
 }
 
 /// `(1 + rho1) / (1 - rho1)` for the lag-1 correlation `rho1` of residuals
@@ -225,6 +226,16 @@ pub struct PoseUncertainty {
     pub position_cov_camera_m2: Matrix3<f64>,
     /// RMS angular error of the normal (both directions together), radians.
     pub normal_sigma_rad: f64,
+}
+
+impl PoseUncertainty {
+    /// Unknown (NaN): the MAVLink convention for a covariance not known.
+    pub fn unknown() -> Self {
+        Self {
+            position_cov_camera_m2: Matrix3::from_element(f64::NAN),
+            normal_sigma_rad: f64::NAN,
+        }
+    }
 }
 
 /// Uncertainty of `pose` (one of `cone_pose`'s solutions for `ellipse_px`)
@@ -297,23 +308,86 @@ pub fn pose_uncertainty_with_edges(
     inlier_points_px: &[[f64; 2]],
     steps: RimSteps,
 ) -> PoseUncertainty {
-    let unknown = PoseUncertainty {
-        position_cov_camera_m2: Matrix3::from_element(f64::NAN),
-        normal_sigma_rad: f64::NAN,
-    };
+    match ellipse_spread(ellipse_px, quality, inlier_points_px, steps) {
+        Some(spread) => pose_uncertainty_from_spread(&spread, camera, pose, radius_m),
+        None => PoseUncertainty::unknown(),
+    }
+}
+
+/// The fitted ellipse and its copies moved by one sigma either way along
+/// each principal direction of its covariance (`ellipse_covariance`, from
+/// the inlier points and [`RimSteps`]): what the fit may be, for anything
+/// computed from the ellipse (the pose's uncertainty, where the canopy's
+/// rim is predicted) to be carried through by second moments about the
+/// nominal. A copy whose matrix is not positive definite is left out.
+#[derive(Clone, Debug)]
+pub struct EllipseSpread {
+    /// The fitted ellipse (undistorted pixels).
+    pub nominal: Ellipse,
+    /// Each carries half its direction's variance: a spread of `f` over
+    /// them is `sum (f(moved) - f(nominal))^2 / 2`.
+    pub moved: Vec<Ellipse>,
+}
+
+/// [`EllipseSpread`] of a fit; `None` with fewer than 6 inliers (a fit
+/// through 5 points has no residual to estimate the noise from), a
+/// non-finite residual or a degenerate point spread.
+pub fn ellipse_spread(
+    ellipse_px: &Ellipse,
+    quality: &FitQuality,
+    inlier_points_px: &[[f64; 2]],
+    steps: RimSteps,
+) -> Option<EllipseSpread> {
+    ellipse_spreads(ellipse_px, quality, inlier_points_px, steps).map(|[all, _]| all)
+}
+
+/// [`ellipse_spread`], and the same without the clipped steps' term (a
+/// bound on how far short of the edge a glow's saturation may leave the
+/// points, not an estimate of it): one covariance, two spreads.
+pub fn ellipse_spreads(
+    ellipse_px: &Ellipse,
+    quality: &FitQuality,
+    inlier_points_px: &[[f64; 2]],
+    steps: RimSteps,
+) -> Option<[EllipseSpread; 2]> {
     let n = inlier_points_px.len();
     if n <= 5 || !(quality.rms_residual_px >= 0.0 && quality.rms_residual_px.is_finite()) {
-        return unknown;
+        return None;
     }
     let sigma_px = quality.rms_residual_px * (n as f64 / (n - 5) as f64).sqrt();
     let widths = Some(steps.widths_px).filter(|w| w.len() == n);
     let clip = Some(steps.clip_px).filter(|c| c.len() == n);
-    let Some(cov_e) = ellipse_covariance(ellipse_px, inlier_points_px, sigma_px, widths, clip)
-    else {
-        return unknown;
-    };
-    let eig = cov_e.symmetric_eigen();
+    let (unclipped, clipped) =
+        ellipse_covariance(ellipse_px, inlier_points_px, sigma_px, widths, clip)?;
     let p0 = ellipse_params(ellipse_px);
+    let spread = |cov: SMatrix<f64, 5, 5>| {
+        let eig = cov.symmetric_eigen();
+        let mut moved = Vec::with_capacity(10);
+        for k in 0..5 {
+            let step = eig.eigenvectors.column(k) * eig.eigenvalues[k].max(0.0).sqrt();
+            for sign in [1.0, -1.0] {
+                if let Some(e) = ellipse_from_params(&(p0 + sign * step)) {
+                    moved.push(e);
+                }
+            }
+        }
+        EllipseSpread {
+            nominal: *ellipse_px,
+            moved,
+        }
+    };
+    Some([spread(unclipped + clipped), spread(unclipped)])
+}
+
+/// [`pose_uncertainty_with_edges`] from the fit's [`EllipseSpread`].
+pub fn pose_uncertainty_from_spread(
+    spread: &EllipseSpread,
+    camera: &CameraModel,
+    pose: &CirclePose,
+    radius_m: f64,
+) -> PoseUncertainty {
+    let unknown = PoseUncertainty::unknown();
+    let ellipse_px = &spread.nominal;
     let Some((_, s0)) = cone_pose_parts(ellipse_px, camera, radius_m, false) else {
         return unknown;
     };
@@ -327,28 +401,24 @@ pub fn pose_uncertainty_with_edges(
             s2
         }
     };
-    for k in 0..5 {
-        let step = eig.eigenvectors.column(k) * eig.eigenvalues[k].max(0.0).sqrt();
-        for sign in [1.0, -1.0] {
-            let moved = ellipse_from_params(&(p0 + sign * step))
-                .and_then(|e| cone_pose_parts(&e, camera, radius_m, false))
-                .map(|(both, s)| {
-                    s_var += 0.5 * (s - s0) * (s - s0);
-                    both
-                })
-                .map(nearest);
-            let Some(moved) = moved else {
-                continue;
-            };
-            let d = moved.centre_camera_m - pose.centre_camera_m;
-            cov_pos += d * d.transpose() * 0.5;
-            let angle = moved
-                .normal_camera
-                .cross(&pose.normal_camera)
-                .norm()
-                .atan2(moved.normal_camera.dot(&pose.normal_camera));
-            normal_var += 0.5 * angle * angle;
-        }
+    for e in &spread.moved {
+        let moved = cone_pose_parts(e, camera, radius_m, false)
+            .map(|(both, s)| {
+                s_var += 0.5 * (s - s0) * (s - s0);
+                both
+            })
+            .map(nearest);
+        let Some(moved) = moved else {
+            continue;
+        };
+        let d = moved.centre_camera_m - pose.centre_camera_m;
+        cov_pos += d * d.transpose() * 0.5;
+        let angle = moved
+            .normal_camera
+            .cross(&pose.normal_camera)
+            .norm()
+            .atan2(moved.normal_camera.dot(&pose.normal_camera));
+        normal_var += 0.5 * angle * angle;
     }
     // Near face-on the pose is not differentiable in the ellipse: the tilt
     // grows as the square root of the cone's asymmetry `s`, whose noise
@@ -424,9 +494,15 @@ mod tests {
             .collect();
         let clip = vec![d; points.len()];
         let sigma = 1e-9;
-        let without = ellipse_covariance(&e, &points, sigma, None, None).unwrap();
-        assert!(without.amax() < 1e-12, "{without}");
-        let with = ellipse_covariance(&e, &points, sigma, None, Some(&clip)).unwrap();
+        let (without, none) = ellipse_covariance(&e, &points, sigma, None, None).unwrap();
+        assert!(
+            without.amax() < 1e-12 && none.amax() == 0.0,
+            "{without} {none}"
+        );
+        let (unclipped, clipped) =
+            ellipse_covariance(&e, &points, sigma, None, Some(&clip)).unwrap();
+        assert_eq!(unclipped, without);
+        let with = unclipped + clipped;
         // EllipseParams: cx, cy, M11, M12, M22.
         for (k, expected) in [(0, d * d / 4.0), (1, d * d / 4.0), (2, d * d), (4, d * d)] {
             assert!((with[(k, k)] - expected).abs() < 1e-9, "{k}: {with}");
