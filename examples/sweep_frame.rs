@@ -143,10 +143,19 @@ fn main() {
                 // trace) beside its error, mm: whether the covariance
                 // covers the answer given.
                 let err_m = off(t.position_camera) * t.range_m / 100.0;
+                // Along the line of sight (the covariance's long axis):
+                // the range's sigma beside the range's error.
+                let los = d.position_body_m.vector().normalize();
+                let range_sigma_m = (los.transpose() * d.position_cov_body_m2 * los)[(0, 0)]
+                    .max(0.0)
+                    .sqrt();
+                let true_range_m = t.position_camera.iter().map(|x| x * x).sum::<f64>().sqrt();
                 println!(
-                    "reported position sigma {:.1} mm (root of the trace) for an error of {:.1} mm",
+                    "reported position sigma {:.1} mm (root of the trace) for an error of {:.1} mm; range sigma {:.1} mm for a range error of {:+.1} mm",
                     1e3 * d.position_cov_body_m2.trace().max(0.0).sqrt(),
-                    1e3 * err_m
+                    1e3 * err_m,
+                    1e3 * range_sigma_m,
+                    1e3 * (p.norm() - true_range_m)
                 );
             }
         }

@@ -267,11 +267,12 @@ pub struct FitSpread<'a> {
 /// (`fit_spread`; `None`: the predictions taken as exact): the rim says
 /// nothing unless each solution has `MIN_DISCRIMINATING` of its telling
 /// points also `SEPARATION_SIGMAS` times its own prediction's spread
-/// (`prediction_spread`) from the other solution's rim. Where that leaves the better solution below `DARKENING_FALLBACK_BELOW`,
-/// the same is judged only on the rim points (distorted pixels) that
-/// `judge` takes (those where a motion blur runs along the rim, not across
-/// it: [`SmearedRim`]); the answer whose better solution has more support
-/// is given, so an answer of the whole rim is never lost.
+/// (`prediction_spread`) from the other solution's rim. Where that leaves
+/// the better solution below `DARKENING_FALLBACK_BELOW`, the same is judged
+/// only on the rim points (distorted pixels) that `judge` takes (those
+/// where a motion blur runs along the rim, not across it: [`SmearedRim`]);
+/// the answer whose better solution has more support is given, so an
+/// answer of the whole rim is never lost.
 pub fn canopy_supports_where(
     image: &GrayImage,
     camera: &CameraModel,

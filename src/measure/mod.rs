@@ -378,7 +378,7 @@ impl Measurer {
             // What the fit may be: for the pose's covariance, and for how
             // far the canopy rim each solution predicts may be off. The
             // latter without the clipped steps' term: that bound on a
-            // glow's inward pull is 5-20 times the error where a glow
+            // glow's inward pull is 3-16 times the range error where a glow
             // saturates the canopy (README, "Pose, ambiguity and
             // uncertainty"), and would silence the rim there.
             let steps = pose::RimSteps {
