@@ -15,13 +15,20 @@
 //! `=trace` each rim pass; the line `truth in the frame` gives the disc's
 //! centre in the same (distorted) pixels as those lines, so that the seeds
 //! on the disc can be told from the rest. This is how a miss of the sweep
-//! is studied: the sweep names the frame, this shows why.
+//! is studied: the sweep names the frame, this shows why. The frame is then
+//! measured again with the truth's ellipse given as the tracking hint
+//! (`seeded at the truth`): a miss that verifies there is the search's, one
+//! that does not is the evidence's at the true rim (the lines after `--
+//! seeded at the truth --` give its reason).
 
 #[path = "../tests/sweep/mod.rs"]
 mod sweep;
 
 use drogue_sim::geometry::V3;
 use drogue_sim::sweep::{Sweep, standard_levels};
+use drogue_vision::config::Config;
+use drogue_vision::measure::ellipse::Ellipse;
+use drogue_vision::testing;
 
 fn usage(message: &str) -> ! {
     eprintln!("{message}\nusage: sweep_frame SEED LEVEL INDEX [--crop DIR]");
@@ -158,6 +165,30 @@ fn main() {
                     1e3 * (p.norm() - true_range_m)
                 );
             }
+        }
+    }
+
+    // The same frame with the truth's ellipse given as the tracking hint:
+    // whether the disc verifies at its true rim, which tells a miss of the
+    // search from one of the evidence (as `seeded_frame` does for the
+    // reference sets). The detector falls back on a full-frame search when
+    // the hint fails; the debug line `not at the tracked ellipse` gives the
+    // hint's own reason.
+    if let Some(t) = &truth {
+        let camera = testing::camera_from_sim(&frame.camera, "sweep");
+        let mut detector = testing::detector(&Config::embedded(), &camera);
+        let e = &t.ellipse;
+        let hint = Ellipse::new(e.cx, e.cy, e.a, e.b, e.theta);
+        eprintln!("-- seeded at the truth --");
+        match detector.detect_explained(&frame.image, Some(&hint)) {
+            Ok(c) => println!(
+                "seeded at the truth: verified, centre ({:.2}, {:.2}) axes {:.2}/{:.2} px, score {:.3}",
+                c.ellipse_px.cx, c.ellipse_px.cy, c.ellipse_px.a, c.ellipse_px.b, c.score
+            ),
+            Err(miss) => println!(
+                "seeded at the truth: not verified; the full-frame search after it: {}",
+                miss.reason
+            ),
         }
     }
 
