@@ -554,11 +554,13 @@ fn prediction_spread(rim: &[RimPoint], fit: Option<&FitSpread>, scale: f64) -> V
     let Some(m_inv) = m.try_inverse() else {
         return vec![0.0; rim.len()];
     };
-    let moved: Vec<_> = fit
-        .spread
-        .moved
-        .iter()
-        .map(|e| ellipse_params(e) - nominal)
+    // Each moved fit as (dc, k dM), undistorted pixels: once, not per point.
+    let moved: Vec<(Vector2<f64>, Matrix2<f64>)> = (fit.spread.moved.iter())
+        .map(|e| {
+            let dp = ellipse_params(e) - nominal;
+            let dm = Matrix2::new(dp[2], dp[3], dp[3], dp[4]);
+            (Vector2::new(dp[0], dp[1]), scale * dm)
+        })
         .collect();
     rim.iter()
         .map(|p| {
@@ -571,11 +573,7 @@ fn prediction_spread(rim: &[RimPoint], fit: Option<&FitSpread>, scale: f64) -> V
                 return 0.0;
             };
             let var: f64 = (moved.iter())
-                .map(|dp| {
-                    let dm = Matrix2::new(dp[2], dp[3], dp[3], dp[4]);
-                    let shift = Vector2::new(dp[0], dp[1]) + scale * (dm * u);
-                    0.5 * n.dot(&shift).powi(2)
-                })
+                .map(|(dc, k_dm)| 0.5 * n.dot(&(dc + k_dm * u)).powi(2))
                 .sum();
             var.sqrt()
         })
