@@ -48,7 +48,9 @@ mod sensor;
 mod sky;
 mod tube;
 
-pub use scene::{Decal, DecalShape, DrogueView, FrameScene, GlareGlow, GlareStreak, Look, Tube};
+pub use scene::{
+    Collar, Decal, DecalShape, DrogueView, FrameScene, GlareGlow, GlareStreak, Look, Tube,
+};
 use sensor::{bounded_blur, inv_normal};
 use sky::sky_row;
 use tube::TubeLayer;

@@ -223,6 +223,7 @@ impl Simulator {
             radius_a: dr.hose_radius_m,
             radius_b: dr.hose_radius_m,
             radiance: dr.hose_radiance,
+            collar: None,
         };
         let body_to_cam = |p_body: [f64; 3]| {
             self.r_body_cam.transpose() * (V3::from(p_body) - V3::from(m.position_body_m))
@@ -233,6 +234,7 @@ impl Simulator {
             radius_a: m.probe_base_radius_m,
             radius_b: m.probe_tip_radius_m,
             radiance: dr.probe_radiance,
+            collar: None,
         };
         // Image motion of the drogue during the exposure.
         let blur_px = if sc.scene.motion_blur && sc.camera.exposure_ms > 0.0 {

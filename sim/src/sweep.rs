@@ -17,7 +17,7 @@
 use crate::TruthEllipse;
 use crate::camera::SimCamera;
 use crate::geometry::{V3, r_body_cam};
-use crate::render::{FrameScene, GlareGlow, GlareStreak, Look, Renderer};
+use crate::render::{Collar, FrameScene, GlareGlow, GlareStreak, Look, Renderer, Tube};
 use image::GrayImage;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -53,6 +53,19 @@ const MAX_GLOW_AT_RIM: f64 = 0.7;
 
 /// Salt of the throat shadow's random stream.
 const THROAT_STREAM: u64 = 0x7468_726f_6174;
+
+/// Salt of the probe collar's random stream.
+const COLLAR_STREAM: u64 = 0x636f_6c6c_6172;
+
+/// Where a probe's nozzle collar starts and how long it is, in tip radii
+/// along the axis back from the centre of the probe's rounded end, and its
+/// radiance as a multiple of the probe's: a light metal ring a little
+/// behind the nozzle, as refuelling probes have (and as the independent
+/// renderer's reference frames draw it, a band across the probe from
+/// about a quarter of a tip radius behind the tip to about one).
+const COLLAR_FROM_TIP_RADII: (f64, f64) = (0.15, 0.45);
+const COLLAR_LENGTH_RADII: (f64, f64) = (0.45, 0.75);
+const COLLAR_RADIANCE_TIMES: (f64, f64) = (1.5, 2.5);
 
 /// What a sweep level varies.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -465,7 +478,7 @@ impl Sweep {
             scene.blur_px = [s.blur_px * phi.cos(), s.blur_px * phi.sin()];
             scene.drogue = drogue;
             scene.hose = Some(hose);
-            scene.probe = probe;
+            scene.probe = probe.map(|p| with_collar(p, key));
             scene.without_drogue = false;
             for _ in 0..s.distractors {
                 scene.decals.push(dark_shape(
@@ -607,6 +620,25 @@ fn settings(level: &Level, rng: &mut ChaCha8Rng) -> Settings {
         | Factor::DarkShapes => {}
     }
     s
+}
+
+/// `probe` with a nozzle collar drawn from a stream of its own (so that
+/// every other draw of a frame is what it was before probes had collars).
+fn with_collar(probe: Tube, key: u64) -> Tube {
+    let mut rng = ChaCha8Rng::seed_from_u64(mix(key ^ COLLAR_STREAM));
+    let r = probe.radius_b;
+    let from_tip_m = r * rng.random_range(COLLAR_FROM_TIP_RADII.0..COLLAR_FROM_TIP_RADII.1);
+    let length_m = r * rng.random_range(COLLAR_LENGTH_RADII.0..COLLAR_LENGTH_RADII.1);
+    let radiance =
+        probe.radiance * rng.random_range(COLLAR_RADIANCE_TIMES.0..COLLAR_RADIANCE_TIMES.1);
+    Tube {
+        collar: Some(Collar {
+            from_tip_m,
+            to_tip_m: from_tip_m + length_m,
+            radiance,
+        }),
+        ..probe
+    }
 }
 
 /// The canopy's throat shadow (strength, e-folding width in metres): the

@@ -19,9 +19,36 @@ pub struct Tube {
     pub radius_b: f64,
     /// Relative radiance 0..1.
     pub radiance: f64,
+    /// A lighter ring round the tube near its `b` end (a probe's nozzle
+    /// collar), if any.
+    pub collar: Option<Collar>,
+}
+
+/// A band round a tube, measured along its axis back from the `b` end
+/// (the probe's tip: the centre of its rounded end), drawn with a radiance
+/// of its own: the light metal collar behind a refuelling probe's nozzle,
+/// which crosses the drogue's disc when the probe points into it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Collar {
+    /// Where the band starts, metres back from `b` along the axis.
+    pub from_tip_m: f64,
+    /// Where it ends, metres back from `b` (more than `from_tip_m`).
+    pub to_tip_m: f64,
+    /// Relative radiance 0..1 of the band.
+    pub radiance: f64,
 }
 
 impl Tube {
+    /// The radiance at axis position `s` (metres from `a`, the axis
+    /// `len_m` long): the collar's within its band, the tube's elsewhere.
+    #[inline]
+    pub(super) fn radiance_at(&self, s: f64, len_m: f64) -> f64 {
+        match self.collar {
+            Some(c) if (c.from_tip_m..=c.to_tip_m).contains(&(len_m - s)) => c.radiance,
+            _ => self.radiance,
+        }
+    }
+
     /// Closest approach of the ray t * d (d = (x, y, 1), t = depth) to the
     /// tube's axis: (depth t, distance beyond the surface in metres,
     /// distance from the axis over the radius).

@@ -155,13 +155,16 @@ fn reference_tube(r: &Renderer, rad: &mut [f32], tube: &Tube, in_front_of: Optio
         return;
     };
     let px = 1.0 / r.cam.fx;
-    let base = tube.radiance;
     for (v, u0, u1) in r.tube_spans(tube) {
         for u in u0..=u1 {
             let ray = r.ray(u, v);
             let Some((t, sd, k)) = axis.probe_ray(&ray) else {
                 continue;
             };
+            let Some((_, s, _)) = axis.closest(&ray) else {
+                continue;
+            };
+            let base = tube.radiance_at(s, axis.len);
             let cov = clamp01(0.5 - sd / (t * px));
             if cov <= 0.0 {
                 continue;
@@ -647,4 +650,70 @@ fn star_has_its_arms_and_waists_where_its_parameters_put_them() {
         assert!(at(w, 0.99 * waist_rho) < 0.0 && at(w, 1.01 * waist_rho) > 0.0);
     }
     assert_eq!(star.bounding_radius(), radius);
+}
+
+/// A probe seen side-on at 2 m, its axis along one image row: along that
+/// row the collar's band is drawn where it lies (each pixel's axial place
+/// from the pixel's own ray: depth over the ray's slope), and only there,
+/// at the collar's radiance: after the haze (a linear map), the band's
+/// light over the probe's is the collar's radiance over the probe's.
+#[test]
+fn a_probe_collar_is_drawn_where_its_band_lies() {
+    let (cam, _) = scene_at("contact", 170);
+    let r = Renderer::new(&cam, look());
+    let (z, row) = (2.0, r.h / 2);
+    let y = r.ray(r.w / 2, row).y * z;
+    let (probe, collar) = (0.2, 0.45);
+    let (from_tip_m, to_tip_m) = (0.05, 0.12);
+    let tube = Tube {
+        a: V3::new(-0.6, y, z),
+        b: V3::new(0.2, y, z),
+        radius_a: 0.04,
+        radius_b: 0.04,
+        radiance: probe,
+        collar: Some(Collar {
+            from_tip_m,
+            to_tip_m,
+            radiance: collar,
+        }),
+    };
+    let mut rad = background(&r);
+    let mut layer = TubeLayer::default();
+    r.rasterise_tube(&mut layer, Some(tube));
+    r.composite_tube(&mut rad, &layer, None);
+    // Unhazed level of a pixel on the axis row.
+    let unhazed = |u: usize| {
+        let v = f64::from(rad[row * r.w + u]);
+        (v - r.look.haze_radiance * r.look.haze) / (1.0 - r.look.haze)
+    };
+    // Pixels a pixel's width or more inside or outside the band (the
+    // pixel at 2 m is about 1.5 mm), clear of the rounded end.
+    let px_m = z / cam.fx;
+    let (mut inside, mut outside) = (Vec::new(), Vec::new());
+    for u in 0..r.w {
+        let back = tube.b.x - r.ray(u, row).x * z;
+        if back < 2.0 * px_m || back > 0.5 {
+            continue;
+        }
+        if back > from_tip_m + px_m && back < to_tip_m - px_m {
+            inside.push(unhazed(u));
+        } else if back < from_tip_m - px_m || back > to_tip_m + px_m {
+            outside.push(unhazed(u));
+        }
+    }
+    assert!(
+        inside.len() > 30 && outside.len() > 200,
+        "{} {}",
+        inside.len(),
+        outside.len()
+    );
+    let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len() as f64;
+    let ratio = mean(&inside) / mean(&outside);
+    assert!((ratio - collar / probe).abs() < 1e-3, "{ratio}");
+    // Level along each part: one value (the axis row sees the tube's
+    // middle everywhere).
+    for part in [&inside, &outside] {
+        let m = mean(part);
+        assert!(part.iter().all(|v| (v - m).abs() < 1e-3 * m), "{part:?}");
+    }
 }

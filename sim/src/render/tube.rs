@@ -166,7 +166,6 @@ impl Renderer {
             return;
         };
         let px = 1.0 / self.cam.fx;
-        let base = tube.radiance;
         for (v, u0, u1) in self.tube_spans(&tube) {
             let first = layer.fragments.len();
             for u in u0..=u1 {
@@ -188,6 +187,7 @@ impl Renderer {
                     continue;
                 }
                 let k = k.min(1.0);
+                let base = tube.radiance_at(s, axis.len);
                 let shade = base * (0.7 + 0.45 * (1.0 - k * k).sqrt())
                     + 0.25 * base * (-((k - 0.45) / 0.12).powi(2)).exp();
                 layer.fragments.push(TubeFragment {

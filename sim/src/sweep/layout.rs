@@ -159,6 +159,7 @@ pub(super) fn lay_out_drogue(
         radius_a: 0.045,
         radius_b: 0.045,
         radiance: 0.09,
+        collar: None,
     };
     let probe = s
         .probe_bin
@@ -234,6 +235,7 @@ pub(super) fn place_probe(
                 radius_a: 0.06,
                 radius_b: 0.035,
                 radiance: 0.16,
+                collar: None,
             };
             let (frac, _, _) = rim_shares(
                 cam,
