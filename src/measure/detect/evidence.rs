@@ -429,7 +429,13 @@ impl MeasuredRim {
                 shading,
                 found_undistorted,
                 clip_px,
+                within_dark,
             } => {
+                // Steps onto a band within the dark (a probe's collar
+                // across the disc) are not the rim's.
+                for (k, &band) in kept.iter_mut().zip(&within_dark) {
+                    *k &= !band;
+                }
                 // Only a sharp step has its two sides' slopes where they
                 // were measured: a blurred one's lie in the blur's tails.
                 let sharp: Vec<bool> = step_widths_px.iter().map(|&w| w <= SHARP_STEP_PX).collect();

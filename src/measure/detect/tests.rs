@@ -1721,3 +1721,43 @@ fn a_probe_just_outside_the_rim_does_not_pull_it_in() {
         "the centre moves {toward_probe:.4} px toward the probe on average"
     );
 }
+
+/// A probe over the lower rim of a disc with the light collar behind its
+/// nozzle lying across that rim, starting 2 px inside it: on the rays down
+/// the probe the only rise is onto the collar (the probe hides the canopy),
+/// and past the collar the probe's dark comes back. Those steps are the
+/// collar's, not the rim's, and are left out of the points the pose is
+/// measured from (`verify::Detector::bands_within_dark`). Before, they
+/// were among them, 2 px inside the rim, where the points measured are
+/// not trimmed.
+#[test]
+fn the_steps_onto_a_probe_collar_are_not_measured() {
+    let (w, h) = (400, 300);
+    let cam = camera(w, h);
+    let truth = Ellipse::new(200.3, 140.6, 50.0, 48.0, 0.0);
+    let mut scene = Scene::new(truth);
+    let tip = [truth.cx + 5.0, truth.cy];
+    scene.bar = Some((tip, 20.0, 40.0));
+    let collar_top = truth.cy + truth.b - 2.0;
+    scene.patches = vec![(
+        [tip[0] - 20.0, collar_top, tip[0] + 20.0, collar_top + 8.0],
+        80.0,
+    )];
+    let img = scene.render(w, h, 2.0, 31);
+    let cand = detector(&cam).detect(&img, None).expect("detected");
+    // The rays down the probe's middle (clear of its sides, whose steps
+    // are the occluder's outline's): none of their points on the collar.
+    let on_collar: Vec<[f64; 2]> = cand
+        .rim_points_undistorted_px
+        .iter()
+        .copied()
+        .filter(|p| (p[0] - tip[0]).abs() < 15.0 && (p[1] - collar_top).abs() < 1.0)
+        .collect();
+    assert!(
+        on_collar.is_empty(),
+        "{} points on the collar: {on_collar:?}",
+        on_collar.len()
+    );
+    // And the rim's own points are kept: most of the rim is measured.
+    assert!(cand.rim_points_undistorted_px.len() > 100);
+}

@@ -225,6 +225,9 @@ pub(super) enum PoseEdges {
         /// How far out from each edge its light side reaches saturation,
         /// pixels (0 below saturation).
         clip_px: Vec<f64>,
+        /// The edges onto a band within the dark ([`Detector::bands_within_dark`]),
+        /// left out of the points measured.
+        within_dark: Vec<bool>,
     },
 }
 
@@ -279,6 +282,16 @@ fn same_rim(a: &Ellipse, b: &Ellipse) -> bool {
 fn within_share(a: &Ellipse, b: &Ellipse, share: f64) -> bool {
     let close = |x: f64, y: f64| (x / y - 1.0).abs() <= share;
     (a.cx - b.cx).hypot(a.cy - b.cy) <= share * a.b && close(a.a, b.a) && close(a.b, b.b)
+}
+
+/// Each step's light level: its mid level plus half its contrast.
+fn step_lights(steps: &RaySteps) -> Vec<f64> {
+    steps
+        .contrasts
+        .iter()
+        .zip(&steps.mid_levels)
+        .map(|(&c, &m)| f64::from(m) + 0.5 * c)
+        .collect()
 }
 
 /// A narrow pass's profile as sampled: `raw` (kept before smoothing) when
@@ -761,12 +774,7 @@ impl Detector {
         min_radius_px: f64,
     ) -> Vec<bool> {
         let mut bars = vec![false; steps.len()];
-        let lights: Vec<f64> = steps
-            .contrasts
-            .iter()
-            .zip(&steps.mid_levels)
-            .map(|(&c, &m)| f64::from(m) + 0.5 * c)
-            .collect();
+        let lights = step_lights(steps);
         // At the least the fill test's margin for a glare's veil.
         let margin_floor = f64::from(VEIL_SIGMAS) * self.noise_gray + f64::from(VEIL_MIN_GRAY);
         // No step can stand out by the margin when all lie within it (the
@@ -782,25 +790,84 @@ impl Detector {
         let contrast = median(&mut steps.contrasts.clone());
         let light = median(&mut lights.clone());
         let margin = contrast.max(margin_floor);
-        let canopy_gap = (self.drogue.canopy_radius_m / self.drogue.inner_radius_m - 1.0).max(0.0);
         for (i, bar) in bars.iter_mut().enumerate() {
             if lights[i] <= light + margin {
                 continue;
             }
-            let p = steps.points_px[i];
-            let (dx, dy) = (p[0] - centre[0], p[1] - centre[1]);
-            let s = dx.hypot(dy);
-            if s < 1.0 {
-                continue;
-            }
-            let dir = [dx / s, dy / s];
-            let reach = BAR_REACH_CANOPY_GAPS * canopy_gap * s.max(min_radius_px);
-            rim::profile(image, centre, dir, s, s + reach, 1.0, &mut self.profile);
-            // Two samples running below the mid level: not one noisy one.
-            let mid = steps.mid_levels[i];
-            *bar = self.profile.windows(2).any(|w| w.iter().all(|&v| v < mid));
+            *bar = self.falls_back(image, centre, steps, i, min_radius_px);
         }
         bars
+    }
+
+    /// The steps that rise onto a band lighter than an occluder but still
+    /// within the dark, such as the light collar behind a probe's nozzle
+    /// lying across the disc: their light side lies below the rim's typical
+    /// mid level (its median light less half its median contrast), and
+    /// beyond it, short of where the canopy's outer rim could lie, the level
+    /// falls back below the step's mid level, as past a light bar
+    /// ([`Self::light_bars`]). Taken on a measuring pass only, where they
+    /// are left out of the points the pose is measured from
+    /// ([`super::evidence::MeasuredRim::near`]): the detection itself is as
+    /// it was (taking them out there too cost the simulator's `everything`
+    /// level two drogues).
+    fn bands_within_dark(
+        &mut self,
+        image: &GrayImage,
+        centre: [f64; 2],
+        steps: &RaySteps,
+        min_radius_px: f64,
+    ) -> Vec<bool> {
+        let mut bands = vec![false; steps.len()];
+        if steps.len() < 2 {
+            return bands;
+        }
+        let lights = step_lights(steps);
+        // As for a light bar: no step lies that far out when all lie
+        // within the veil's margin of each other.
+        let margin_floor = f64::from(VEIL_SIGMAS) * self.noise_gray + f64::from(VEIL_MIN_GRAY);
+        let (low, high) = lights
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &v| {
+                (l.min(v), h.max(v))
+            });
+        if high - low <= margin_floor {
+            return bands;
+        }
+        let typical_mid = median(&mut lights.clone()) - 0.5 * median(&mut steps.contrasts.clone());
+        for (i, band) in bands.iter_mut().enumerate() {
+            if lights[i] < typical_mid {
+                *band = self.falls_back(image, centre, steps, i, min_radius_px);
+            }
+        }
+        bands
+    }
+
+    /// Whether beyond step `i` of `steps` (on its ray from `centre`), short
+    /// of where the canopy's outer rim could lie ([`BAR_REACH_CANOPY_GAPS`]
+    /// of the gap at the step's radius, or at `min_radius_px` if more), the
+    /// level falls below the step's mid level on two samples running: the
+    /// dark again, past a bar.
+    fn falls_back(
+        &mut self,
+        image: &GrayImage,
+        centre: [f64; 2],
+        steps: &RaySteps,
+        i: usize,
+        min_radius_px: f64,
+    ) -> bool {
+        let canopy_gap = (self.drogue.canopy_radius_m / self.drogue.inner_radius_m - 1.0).max(0.0);
+        let p = steps.points_px[i];
+        let (dx, dy) = (p[0] - centre[0], p[1] - centre[1]);
+        let s = dx.hypot(dy);
+        if s < 1.0 {
+            return false;
+        }
+        let dir = [dx / s, dy / s];
+        let reach = BAR_REACH_CANOPY_GAPS * canopy_gap * s.max(min_radius_px);
+        rim::profile(image, centre, dir, s, s + reach, 1.0, &mut self.profile);
+        // Two samples running below the mid level: not one noisy one.
+        let mid = steps.mid_levels[i];
+        self.profile.windows(2).any(|w| w.iter().all(|&v| v < mid))
     }
 
     /// The narrow ray pass around `start` and the robust refit, with the
@@ -1195,6 +1262,10 @@ impl Detector {
             return Err(Reject::LightInside(fill));
         }
         let shape = inliers.len() as f64 / rays_in_image as f64;
+        let within_dark = match rim_use {
+            RimUse::Measure => self.bands_within_dark(image, centre, &steps, start.b),
+            RimUse::Scout => Vec::new(),
+        };
         let RaySteps {
             points_px,
             undistorted,
@@ -1210,6 +1281,7 @@ impl Detector {
                 shading,
                 found_undistorted: undistorted,
                 clip_px,
+                within_dark,
             },
             RimUse::Scout => PoseEdges::Own(undistorted),
         };
