@@ -775,18 +775,11 @@ impl Detector {
     ) -> Vec<bool> {
         let mut bars = vec![false; steps.len()];
         let lights = step_lights(steps);
-        // At the least the fill test's margin for a glare's veil.
-        let margin_floor = f64::from(VEIL_SIGMAS) * self.noise_gray + f64::from(VEIL_MIN_GRAY);
         // No step can stand out by the margin when all lie within it (the
         // usual rim: no medians taken).
-        let (low, high) = lights
-            .iter()
-            .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &v| {
-                (l.min(v), h.max(v))
-            });
-        if high - low <= margin_floor {
+        let Some(margin_floor) = self.lights_spread_beyond_veil(&lights) else {
             return bars;
-        }
+        };
         let contrast = median(&mut steps.contrasts.clone());
         let light = median(&mut lights.clone());
         let margin = contrast.max(margin_floor);
@@ -824,13 +817,7 @@ impl Detector {
         let lights = step_lights(steps);
         // As for a light bar: no step lies that far out when all lie
         // within the veil's margin of each other.
-        let margin_floor = f64::from(VEIL_SIGMAS) * self.noise_gray + f64::from(VEIL_MIN_GRAY);
-        let (low, high) = lights
-            .iter()
-            .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &v| {
-                (l.min(v), h.max(v))
-            });
-        if high - low <= margin_floor {
+        if self.lights_spread_beyond_veil(&lights).is_none() {
             return bands;
         }
         let typical_mid = median(&mut lights.clone()) - 0.5 * median(&mut steps.contrasts.clone());
@@ -840,6 +827,23 @@ impl Detector {
             }
         }
         bands
+    }
+
+    /// The fill test's margin for a glare's veil (at the least), when the
+    /// steps' `lights` spread over more than it; `None` when they all lie
+    /// within it of each other (the usual rim).
+    fn lights_spread_beyond_veil(&self, lights: &[f64]) -> Option<f64> {
+        let margin_floor = f64::from(VEIL_SIGMAS) * self.noise_gray + f64::from(VEIL_MIN_GRAY);
+        let (low, high) = lights
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &v| {
+                (l.min(v), h.max(v))
+            });
+        if high - low <= margin_floor {
+            None
+        } else {
+            Some(margin_floor)
+        }
     }
 
     /// Whether beyond step `i` of `steps` (on its ray from `centre`), short
