@@ -100,7 +100,12 @@ const fn limit(
 /// 10.01 degrees from the truth's (the true half 0.35 -> 0.46), where more
 /// than 10 counts (`sweep_frame` prints both). Over the seeds 1-32 (30
 /// frames a level) the level's position median went 0.0292 -> 0.0195 %,
-/// with 951 of 960 detected (952 before).
+/// with 951 of 960 detected (952 before). The `probe tip` levels
+/// (forty-seventh session: the probe's rounded tip over the disc's middle,
+/// with blur and `everything`'s imaging) are held to what the detector of
+/// that commit gives; over the seeds 1-32 (30 frames a level) they detect
+/// 933, 916 and 819 of 960 with 0, 6 and 34 wrong ellipses (README,
+/// "Robustness sweep").
 #[rustfmt::skip]
 const LIMITS: &[Limit] = &[
     //    level                                  detected %  false  wrong  centre px     position %    normal deg
@@ -146,6 +151,9 @@ const LIMITS: &[Limit] = &[
     limit("probe occlusion 10-20 %", Some(100), 0, 0, Some(0.02), Some(0.019), Some(0.16)),
     limit("probe occlusion 20-30 %", Some(100), 0, 0, Some(0.026), Some(0.028), Some(0.14)),
     limit("probe occlusion 30-40 %", Some(100), 0, 0, Some(0.04), Some(0.026), Some(0.32)),
+    limit("probe tip 10-20 %", Some(100), 4, 0, Some(0.22), Some(0.71), Some(1.65)),
+    limit("probe tip 20-30 %", Some(100), 2, 0, Some(0.25), Some(0.49), Some(0.75)),
+    limit("probe tip 30-40 %", Some(90), 2, 0, Some(0.83), Some(1.4), Some(1.14)),
     limit("distractors 1", Some(100), 0, 0, Some(0.013), Some(0.029), Some(0.17)),
     limit("distractors 3", Some(100), 0, 0, Some(0.017), Some(0.024), Some(0.17)),
     limit("star distractors 2", Some(100), 0, 0, Some(0.023), Some(0.022), Some(0.22)),

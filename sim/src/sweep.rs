@@ -114,9 +114,14 @@ pub enum Factor {
     /// the share of its radiance lost at the disc's edge).
     ThroatShadow,
     /// The glow about the sun's image near the disc, with a faint streak
-    /// through it (value: the glow's standard deviation, pixels). Last: a
-    /// level's frames are seeded from its factor's place in this list.
+    /// through it (value: the glow's standard deviation, pixels).
     GlareGlow,
+    /// The probe's rounded tip over the disc's middle, as wide as the
+    /// share asks (value: lower end of a 10 % bin of the rim hidden), at
+    /// 3-7 m, tilt 20-60 degrees, blur 8-15 px and the `everything`
+    /// level's imaging. Last: a level's frames are seeded from its
+    /// factor's place in this list.
+    ProbeTip,
 }
 
 impl Factor {
@@ -135,6 +140,7 @@ impl Factor {
             Factor::Range => "range",
             Factor::Tilt => "tilt",
             Factor::Occlusion => "probe occlusion",
+            Factor::ProbeTip => "probe tip",
             Factor::Distractors => "distractors",
             Factor::StarDistractors => "star distractors",
             Factor::ThroatShadow => "throat shadow",
@@ -189,7 +195,9 @@ impl Level {
             Factor::Distortion => format!("k1 {v:.2}"),
             Factor::Range => format!("{v:.0} m"),
             Factor::Tilt => format!("{v:.0} deg"),
-            Factor::Occlusion => format!("{:.0}-{:.0} %", v * 100.0, v * 100.0 + 10.0),
+            Factor::Occlusion | Factor::ProbeTip => {
+                format!("{:.0}-{:.0} %", v * 100.0, v * 100.0 + 10.0)
+            }
             Factor::Distractors | Factor::StarDistractors => format!("{v:.0}"),
             Factor::ThroatShadow => format!("{:.0} %", v * 100.0),
             _ => "-".into(),
@@ -210,8 +218,8 @@ impl Level {
 pub fn standard_levels() -> Vec<Level> {
     use Factor::{
         Baseline, Blur, CanopylessDisc, Crescent, DarkRing, DarkShapes, DarkStars, Distortion,
-        Distractors, Everything, Exposure, Glare, GlareGlow, Haze, Noise, Occlusion, Range,
-        StarDistractors, ThroatShadow, Tilt, Vignetting,
+        Distractors, Everything, Exposure, Glare, GlareGlow, Haze, Noise, Occlusion, ProbeTip,
+        Range, StarDistractors, ThroatShadow, Tilt, Vignetting,
     };
     let mut levels = vec![Level::new(Baseline, 0.0)];
     let mut add = |f: Factor, values: &[f64]| {
@@ -228,6 +236,7 @@ pub fn standard_levels() -> Vec<Level> {
     add(Range, &[1.0, 2.0, 3.0, 5.0, 8.0, 12.0, 16.0]);
     add(Tilt, &[0.0, 15.0, 30.0, 45.0, 60.0, 75.0]);
     add(Occlusion, &[0.0, 0.1, 0.2, 0.3]);
+    add(ProbeTip, &[0.1, 0.2, 0.3]);
     add(Distractors, &[1.0, 3.0]);
     add(StarDistractors, &[2.0]);
     add(ThroatShadow, &[0.15, 0.3]);
@@ -339,6 +348,9 @@ pub struct Settings {
     pub glare_glow_sigma_px: Option<f64>,
     /// Share of the rim the probe may hide (low, high), if a probe.
     pub probe_bin: Option<(f64, f64)>,
+    /// The probe's tip lies over the disc's middle, its width chosen for
+    /// the share (else the probe of fixed width slides sideways).
+    pub probe_tip: bool,
     /// Dark distractor shapes.
     pub distractors: usize,
     /// The distractors are stars and flowers (else blobs and rectangles).
@@ -554,6 +566,7 @@ fn settings(level: &Level, rng: &mut ChaCha8Rng) -> Settings {
         glare_width_px: None,
         glare_glow_sigma_px: None,
         probe_bin: None,
+        probe_tip: false,
         distractors: 0,
         star_distractors: false,
         distortion: [0.0; 5],
@@ -581,6 +594,14 @@ fn settings(level: &Level, rng: &mut ChaCha8Rng) -> Settings {
         Factor::Occlusion => {
             s.range_m = rng.random_range(2.5..4.0);
             s.probe_bin = Some((v, v + 0.1));
+        }
+        Factor::ProbeTip => {
+            s.range_m = rng.random_range(3.0..7.0);
+            s.tilt_deg = rng.random_range(20.0..60.0);
+            harsh_imaging(&mut s, rng);
+            s.blur_px = rng.random_range(8.0..15.0);
+            s.probe_bin = Some((v, v + 0.1));
+            s.probe_tip = true;
         }
         Factor::Distractors => s.distractors = v as usize,
         Factor::StarDistractors => {
@@ -670,6 +691,7 @@ fn harsh_imaging(s: &mut Settings, rng: &mut ChaCha8Rng) {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use layout::TIP_NEAR_CENTRE;
 
     #[test]
     fn frames_are_deterministic_and_levels_distinct() {
@@ -726,6 +748,44 @@ mod tests {
         assert_eq!(lighter, 0);
         assert!(Sweep::new(5).with_throat_shade(1.0).is_none());
         assert!(Sweep::new(5).with_throat_shade(f64::NAN).is_none());
+    }
+
+    #[test]
+    fn probe_tip_levels_put_the_tip_over_the_middle_and_hide_their_share() {
+        let cam = camera([0.0; 5]);
+        for lo in [0.1, 0.2, 0.3] {
+            let level = Level::new(Factor::ProbeTip, lo);
+            for i in 0..4 {
+                let mut rng = ChaCha8Rng::seed_from_u64(100 * i + (10.0 * lo) as u64);
+                let s = settings(&level, &mut rng);
+                let (drogue, _, probe, t) = lay_out_drogue(&cam, &s, &mut rng);
+                let tip = probe.expect("a probe");
+                // The tip's centre seen from the camera, carried along its
+                // ray to the drogue's depth: b = k (c + o) with o across the
+                // line of sight, so b |c|^2 / (b . c) = c + o.
+                let c = drogue.centre;
+                let k = tip.b.dot(&c) / c.norm_squared();
+                let across = (tip.b / k - c).norm();
+                assert!(
+                    across <= TIP_NEAR_CENTRE * INNER_RADIUS_M + 1e-9,
+                    "bin {lo}, frame {i}: tip {across} m from the centre"
+                );
+                // As wide as seen as the disc at most.
+                assert!(tip.radius_b / k <= INNER_RADIUS_M + 1e-9);
+                assert!(tip.radius_a > tip.radius_b);
+                assert!(
+                    t.probe_rim_frac >= lo - 0.015 && t.probe_rim_frac <= lo + 0.115,
+                    "bin {lo}, frame {i}: {}",
+                    t.probe_rim_frac
+                );
+                assert!(t.expect_detect);
+            }
+            // The level draws what it says.
+            let f = Sweep::new(3).frame(&level, 0);
+            assert!(f.settings.probe_tip);
+            assert!((8.0..15.0).contains(&f.settings.blur_px));
+            assert!((3.0..7.0).contains(&f.settings.range_m));
+        }
     }
 
     #[test]

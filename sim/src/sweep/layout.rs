@@ -103,6 +103,13 @@ pub(super) fn rim_shares(
     )
 }
 
+/// Farthest the probe's tip lies from the disc's centre on the probe-tip
+/// levels, in inner radii (seen across the line of sight).
+pub(super) const TIP_NEAR_CENTRE: f64 = 0.3;
+/// The probe's radius at its far end over its tip's (0.06 over 0.035 m
+/// for the sliding probe).
+const TIP_TO_BASE: f64 = 1.7;
+
 /// The drogue, its hose, the probe (occlusion levels) and the truth.
 pub(super) fn lay_out_drogue(
     cam: &SimCamera,
@@ -161,9 +168,13 @@ pub(super) fn lay_out_drogue(
         radiance: 0.09,
         collar: None,
     };
-    let probe = s
-        .probe_bin
-        .and_then(|bin| place_probe(cam, &drogue, &hose, bin, rng));
+    let probe = s.probe_bin.and_then(|bin| {
+        if s.probe_tip {
+            place_probe_tip(cam, &drogue, &hose, bin, rng)
+        } else {
+            place_probe(cam, &drogue, &hose, bin, rng)
+        }
+    });
     let (probe_frac, visible, _) = rim_shares(
         cam,
         &centre,
@@ -201,6 +212,71 @@ pub(super) fn lay_out_drogue(
         expect_detect: visible >= MIN_VISIBLE_RIM && ellipse.a.is_finite(),
     };
     (drogue, hose, probe, truth)
+}
+
+/// A probe whose rounded tip lies over the disc's middle (its centre within
+/// [`TIP_NEAR_CENTRE`] of the inner radius of the disc's centre, as seen
+/// from the camera) hiding a share of the inner rim within `bin`: a tube at
+/// 45-70 % of the drogue's depth from a random side, as wide as the share
+/// asks (its tip's radius up to the inner radius, as seen). The other
+/// renderer's probes are drawn this way: the tip where the nozzle meets the
+/// coupling, the tube's width what hides the rim.
+pub(super) fn place_probe_tip(
+    cam: &SimCamera,
+    d: &DrogueView,
+    hose: &Tube,
+    bin: (f64, f64),
+    rng: &mut ChaCha8Rng,
+) -> Option<Tube> {
+    let target = rng.random_range(bin.0.max(0.02)..bin.1);
+    let c_hat = d.centre.normalize();
+    let (x, y) = (perpendicular(&c_hat), c_hat.cross(&perpendicular(&c_hat)));
+    let mut best: Option<(f64, Tube)> = None;
+    for _ in 0..8 {
+        let k = rng.random_range(0.45..0.7);
+        let psi = rng.random_range(0.0..TAU);
+        let dir = x * psi.cos() + y * psi.sin();
+        let side = c_hat.cross(&dir);
+        // The tip's centre: a uniform point of the disc of radius
+        // TIP_NEAR_CENTRE * r about the drogue's centre, across the line
+        // of sight.
+        let (rho, phi) = (
+            TIP_NEAR_CENTRE * d.inner_radius * rng.random_range(0.0..1.0f64).sqrt(),
+            rng.random_range(0.0..TAU),
+        );
+        let (along, across) = (rho * phi.cos(), rho * phi.sin());
+        for step in 0..=60 {
+            // The tip's radius as seen, 0.1-1.0 of the inner radius.
+            let share = 0.1 + 0.9 * step as f64 / 60.0;
+            let radius_b = k * share * d.inner_radius;
+            let at = |a: f64| (d.centre + side * across + dir * a) * k;
+            let tube = Tube {
+                a: at(along + 3.0),
+                b: at(along),
+                radius_a: radius_b * TIP_TO_BASE,
+                radius_b,
+                radiance: 0.16,
+                collar: None,
+            };
+            let (frac, _, _) = rim_shares(
+                cam,
+                &d.centre,
+                &d.e1,
+                &d.e2,
+                d.inner_radius,
+                Some(&tube),
+                Some(hose),
+            );
+            let miss = (frac - target).abs();
+            if best.as_ref().is_none_or(|(m, _)| miss < *m) {
+                best = Some((miss, tube));
+            }
+        }
+        if best.as_ref().is_some_and(|(m, _)| *m < 0.01) {
+            break;
+        }
+    }
+    best.map(|(_, t)| t)
 }
 
 /// A probe between the camera and the drogue hiding a share of the inner
