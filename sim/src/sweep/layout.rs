@@ -228,15 +228,7 @@ pub(super) fn place_probe_tip(
     bin: (f64, f64),
     rng: &mut ChaCha8Rng,
 ) -> Option<Tube> {
-    let target = rng.random_range(bin.0.max(0.02)..bin.1);
-    let c_hat = d.centre.normalize();
-    let (x, y) = (perpendicular(&c_hat), c_hat.cross(&perpendicular(&c_hat)));
-    let mut best: Option<(f64, Tube)> = None;
-    for _ in 0..8 {
-        let k = rng.random_range(0.45..0.7);
-        let psi = rng.random_range(0.0..TAU);
-        let dir = x * psi.cos() + y * psi.sin();
-        let side = c_hat.cross(&dir);
+    place_probe_nearest(cam, d, hose, bin, rng, |rng, way| {
         // The tip's centre: a uniform point of the disc of radius
         // TIP_NEAR_CENTRE * r about the drogue's centre, across the line
         // of sight.
@@ -245,38 +237,22 @@ pub(super) fn place_probe_tip(
             rng.random_range(0.0..TAU),
         );
         let (along, across) = (rho * phi.cos(), rho * phi.sin());
-        for step in 0..=60 {
-            // The tip's radius as seen, 0.1-1.0 of the inner radius.
-            let share = 0.1 + 0.9 * step as f64 / 60.0;
-            let radius_b = k * share * d.inner_radius;
-            let at = |a: f64| (d.centre + side * across + dir * a) * k;
-            let tube = Tube {
-                a: at(along + 3.0),
-                b: at(along),
-                radius_a: radius_b * TIP_TO_BASE,
-                radius_b,
-                radiance: 0.16,
-                collar: None,
-            };
-            let (frac, _, _) = rim_shares(
-                cam,
-                &d.centre,
-                &d.e1,
-                &d.e2,
-                d.inner_radius,
-                Some(&tube),
-                Some(hose),
-            );
-            let miss = (frac - target).abs();
-            if best.as_ref().is_none_or(|(m, _)| miss < *m) {
-                best = Some((miss, tube));
-            }
-        }
-        if best.as_ref().is_some_and(|(m, _)| *m < 0.01) {
-            break;
-        }
-    }
-    best.map(|(_, t)| t)
+        (0..=60)
+            .map(|step| {
+                // The tip's radius as seen, 0.1-1.0 of the inner radius.
+                let share = 0.1 + 0.9 * f64::from(step) / 60.0;
+                let radius_b = way.k * share * d.inner_radius;
+                Tube {
+                    a: way.at(d, across, along + 3.0),
+                    b: way.at(d, across, along),
+                    radius_a: radius_b * TIP_TO_BASE,
+                    radius_b,
+                    radiance: 0.16,
+                    collar: None,
+                }
+            })
+            .collect()
+    })
 }
 
 /// A probe between the camera and the drogue hiding a share of the inner
@@ -290,6 +266,53 @@ pub(super) fn place_probe(
     bin: (f64, f64),
     rng: &mut ChaCha8Rng,
 ) -> Option<Tube> {
+    place_probe_nearest(cam, d, hose, bin, rng, |rng, way| {
+        let tip_along = -rng.random_range(0.1..0.5) * d.inner_radius;
+        let reach = d.inner_radius + 0.25;
+        (0..=80)
+            .map(|step| {
+                let offset = -reach + 2.0 * reach * f64::from(step) / 80.0;
+                Tube {
+                    a: way.at(d, offset, tip_along + 3.0),
+                    b: way.at(d, offset, tip_along),
+                    radius_a: 0.06,
+                    radius_b: 0.035,
+                    radiance: 0.16,
+                    collar: None,
+                }
+            })
+            .collect()
+    })
+}
+
+/// The way a probe comes in: at `k` of the drogue's depth, along `dir`
+/// (across the line of sight), `side` across it.
+struct ProbeWay {
+    k: f64,
+    dir: V3,
+    side: V3,
+}
+
+impl ProbeWay {
+    /// The point `across` to the side and `along` the way from the
+    /// drogue's centre, at the drogue's depth scaled by `k` (the same
+    /// image position).
+    fn at(&self, d: &DrogueView, across: f64, along: f64) -> V3 {
+        (d.centre + self.side * across + self.dir * along) * self.k
+    }
+}
+
+/// The probe of those `tubes` gives for up to eight random ways in whose
+/// share of the rim hidden is nearest a target drawn from `bin` (stopping
+/// once one is within 0.01 of it).
+fn place_probe_nearest(
+    cam: &SimCamera,
+    d: &DrogueView,
+    hose: &Tube,
+    bin: (f64, f64),
+    rng: &mut ChaCha8Rng,
+    tubes: impl Fn(&mut ChaCha8Rng, &ProbeWay) -> Vec<Tube>,
+) -> Option<Tube> {
     let target = rng.random_range(bin.0.max(0.02)..bin.1);
     let c_hat = d.centre.normalize();
     let (x, y) = (perpendicular(&c_hat), c_hat.cross(&perpendicular(&c_hat)));
@@ -298,21 +321,12 @@ pub(super) fn place_probe(
         let k = rng.random_range(0.45..0.7);
         let psi = rng.random_range(0.0..TAU);
         let dir = x * psi.cos() + y * psi.sin();
-        let side = c_hat.cross(&dir);
-        let tip_along = -rng.random_range(0.1..0.5) * d.inner_radius;
-        let reach = d.inner_radius + 0.25;
-        for step in 0..=80 {
-            let offset = -reach + 2.0 * reach * step as f64 / 80.0;
-            // Points at the drogue's depth scaled by k: same image position.
-            let at = |along: f64| (d.centre + side * offset + dir * along) * k;
-            let tube = Tube {
-                a: at(tip_along + 3.0),
-                b: at(tip_along),
-                radius_a: 0.06,
-                radius_b: 0.035,
-                radiance: 0.16,
-                collar: None,
-            };
+        let way = ProbeWay {
+            k,
+            dir,
+            side: c_hat.cross(&dir),
+        };
+        for tube in tubes(rng, &way) {
             let (frac, _, _) = rim_shares(
                 cam,
                 &d.centre,
