@@ -1,7 +1,8 @@
 //! Randomised single frames for a robustness sweep: one factor at a time
 //! (haze, glare streak over the disc, motion blur, noise, exposure,
 //! vignetting, lens distortion, range, tilt, probe occlusion, distractors,
-//! star distractors, the canopy's throat shadow)
+//! star distractors, the canopy's throat shadow), the probe's rounded tip
+//! over the disc's middle with blur and harsh imaging (`probe tip`),
 //! and everything at once, plus drogue-free frames with look-alikes
 //! (crescents, canopy-less discs and rings, dark blobs and rectangles,
 //! stars and flowers).
