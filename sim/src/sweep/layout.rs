@@ -288,8 +288,11 @@ pub(super) fn place_probe(
 /// The way a probe comes in: at `k` of the drogue's depth, along `dir`
 /// (across the line of sight), `side` across it.
 struct ProbeWay {
+    /// The probe's depth over the drogue's (0.45-0.7).
     k: f64,
+    /// Unit vector, camera frame, across the line of sight to the drogue.
     dir: V3,
+    /// Unit vector, camera frame, across both the line of sight and `dir`.
     side: V3,
 }
 
